@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Installs everything desplat needs on a fresh Debian 12 (bookworm) machine.
+# Non-interactive; run as root (or with sudo available).
+set -euo pipefail
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update
+$SUDO apt-get install -y --no-install-recommends \
+  build-essential cmake ninja-build pkg-config git ca-certificates \
+  libeigen3-dev libglm-dev libceres-dev \
+  libopencv-dev libopenimageio-dev openimageio-tools \
+  libgtest-dev libgmock-dev libbenchmark-dev \
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev \
+  colmap

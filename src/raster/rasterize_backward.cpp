@@ -1,0 +1,213 @@
+// Backward pass. Each tile walks its list back to front and writes, per (tile,
+// Gaussian) entry, the gradient with respect to that Gaussian's 2D quantities. Then
+// each Gaussian sums its entries in a fixed order and chains through color, opacity,
+// conic and projection to its 3D parameters. No atomics; results do not depend on the
+// thread count or the schedule.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "raster/fast_exp.hpp"
+#include "raster/stage_math.hpp"
+#include "raster/tiles.hpp"
+
+namespace desplat {
+namespace {
+using namespace raster;
+
+// ∂L with respect to one Gaussian's 2D quantities, from the pixels of one tile.
+struct EntryGrad {
+  float mean2d[2];
+  float conic[3];
+  float opacity;  // ∂L/∂o (after the sigmoid)
+  float rgb[3];
+  float depth;
+  float abs_mean2d[2];  // Σ |per-pixel ∂L/∂μ2d|, the densification statistic
+};
+
+void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
+                   const float* dA, const float* dD, EntryGrad* entry_grads) {
+  constexpr int S = kTileSize;
+  const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
+  const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
+  // Per pixel: current transmittance (after the Gaussian being visited), the color and
+  // depth blended behind it, the incoming gradients, and the last blended index.
+  alignas(64) float T[S * S], T_final[S * S], Br[S * S], Bg[S * S], Bb[S * S], Bd[S * S];
+  alignas(64) float gr[S * S], gg[S * S], gb[S * S], ga[S * S], gd[S * S];
+  alignas(64) int32_t last[S * S];
+  alignas(64) float px_center[S];
+  for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
+  int max_last = -1;
+  for (int r = 0; r < S; ++r)
+    for (int col = 0; col < S; ++col) {
+      const int j = r * S + col;
+      Br[j] = Bg[j] = Bb[j] = Bd[j] = 0;
+      if (r < rows && col < cols) {
+        const int64_t p = int64_t(y0 + r) * fw.width + (x0 + col);
+        T[j] = T_final[j] = fw.final_transmittance[p];
+        last[j] = fw.last_contributor[p];
+        gr[j] = dC ? dC[3 * p] : 0.0f;
+        gg[j] = dC ? dC[3 * p + 1] : 0.0f;
+        gb[j] = dC ? dC[3 * p + 2] : 0.0f;
+        ga[j] = dA ? dA[p] : 0.0f;
+        gd[j] = dD ? dD[p] : 0.0f;
+      } else {
+        T[j] = T_final[j] = 1, last[j] = -1;
+        gr[j] = gg[j] = gb[j] = ga[j] = gd[j] = 0;
+      }
+      max_last = std::max(max_last, last[j]);
+    }
+
+  const int begin = fw.tile_offsets[tile], end = fw.tile_offsets[tile + 1];
+  // Entries after the last blended one in every pixel get zero gradient.
+  for (int k = max_last + 1; k < end - begin; ++k) entry_grads[begin + k] = EntryGrad{};
+  for (int k = max_last; k >= 0; --k) {
+    const int32_t g = fw.tile_entries[begin + k];
+    const float mx = fw.means2d[2 * g], my = fw.means2d[2 * g + 1];
+    const float a = fw.conics[3 * g], b = fw.conics[3 * g + 1], c = fw.conics[3 * g + 2];
+    const float o = fw.opacity[g], z = fw.depths[g];
+    const float cr = fw.rgb[3 * g], cg = fw.rgb[3 * g + 1], cb = fw.rgb[3 * g + 2];
+    float s_r = 0, s_g = 0, s_b = 0, s_z = 0, s_o = 0, s_a = 0, s_b2 = 0, s_c = 0;
+    float s_mx = 0, s_my = 0, s_absx = 0, s_absy = 0;
+    int r0, r1;
+    box_rows_in_tile(my, fw.radii[2 * g + 1], y0, rows, r0, r1);
+    for (int r = r0; r <= r1; ++r) {
+      const float dy = my - (y0 + r + 0.5f);
+      const int row = r * S;
+#pragma omp simd reduction(+ : s_r, s_g, s_b, s_z, s_o, s_a, s_b2, s_c, s_mx, s_my, s_absx, s_absy)
+      for (int col = 0; col < S; ++col) {
+        const int j = row + col;
+        const float dx = mx - px_center[col];
+        const float sigma = gaussian_sigma(a, b, c, dx, dy);
+        const float vis = fast_exp_nonpositive(-sigma);
+        const float alpha = std::min(kAlphaMax, o * vis);
+        const bool hit = k <= last[j] && sigma >= 0.0f && alpha >= kAlphaMin;
+        const float ra = 1.0f / (1.0f - alpha);
+        const float t_before = T[j] * ra;  // transmittance in front of this Gaussian
+        const float w = alpha * t_before;
+        // ∂C/∂α = c·T − (blended behind)/(1 − α); ∂A/∂α = T_final/(1 − α).
+        const float d_alpha = (cr * t_before - Br[j] * ra) * gr[j] + (cg * t_before - Bg[j] * ra) * gg[j] +
+                              (cb * t_before - Bb[j] * ra) * gb[j] + (z * t_before - Bd[j] * ra) * gd[j] +
+                              T_final[j] * ra * ga[j];
+        const bool unclamped = hit && o * vis <= kAlphaMax;
+        const float d_sigma = unclamped ? -d_alpha * o * vis : 0.0f;
+        const float gmx = d_sigma * (a * dx + b * dy);
+        const float gmy = d_sigma * (b * dx + c * dy);
+        s_r += hit ? w * gr[j] : 0.0f;
+        s_g += hit ? w * gg[j] : 0.0f;
+        s_b += hit ? w * gb[j] : 0.0f;
+        s_z += hit ? w * gd[j] : 0.0f;
+        s_o += unclamped ? d_alpha * vis : 0.0f;
+        s_a += 0.5f * d_sigma * dx * dx;
+        s_b2 += d_sigma * dx * dy;
+        s_c += 0.5f * d_sigma * dy * dy;
+        s_mx += gmx;
+        s_my += gmy;
+        s_absx += std::abs(gmx);
+        s_absy += std::abs(gmy);
+        Br[j] += hit ? cr * w : 0.0f;
+        Bg[j] += hit ? cg * w : 0.0f;
+        Bb[j] += hit ? cb * w : 0.0f;
+        Bd[j] += hit ? z * w : 0.0f;
+        T[j] = hit ? t_before : T[j];
+      }
+    }
+    entry_grads[begin + k] = EntryGrad{{s_mx, s_my}, {s_a, s_b2, s_c}, s_o, {s_r, s_g, s_b}, s_z, {s_absx, s_absy}};
+  }
+}
+
+}  // namespace
+
+void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
+                        const RasterOutput& fw, std::span<const float> dL_dcolor,
+                        std::span<const float> dL_dalpha, std::span<const float> dL_ddepth,
+                        RasterGradients& grads) {
+  g.validate();
+  cam.validate();
+  const size_t n = g.size();
+  const size_t pixels = size_t(cam.width) * cam.height;
+  if (fw.width != cam.width || fw.height != cam.height || fw.visible.size() != n)
+    throw std::invalid_argument("rasterize_backward: forward output does not match the camera or Gaussians");
+  auto check = [](std::span<const float> v, size_t expect, const char* name) {
+    if (!v.empty() && v.size() != expect)
+      throw std::invalid_argument(std::string("rasterize_backward: ") + name + " has " +
+                                  std::to_string(v.size()) + " values, expected " + std::to_string(expect));
+  };
+  check(dL_dcolor, 3 * pixels, "dL_dcolor");
+  check(dL_dalpha, pixels, "dL_dalpha");
+  check(dL_ddepth, pixels, "dL_ddepth");
+
+  const int color_stride = g.color_floats_per_gaussian();
+  grads.means.assign(3 * n, 0.0f);
+  grads.log_scales.assign(3 * n, 0.0f);
+  grads.quats.assign(4 * n, 0.0f);
+  grads.opacity_logits.assign(n, 0.0f);
+  grads.colors.assign(color_stride * n, 0.0f);
+  grads.means2d.assign(2 * n, 0.0f);
+  grads.absgrad.assign(n, 0.0f);
+
+  const TileGrid grid(cam.width, cam.height);
+  std::vector<EntryGrad> entry_grads(fw.tile_entries.size());
+  const int threads = thread_count(s);
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+  for (int tile = 0; tile < grid.count(); ++tile)
+    backward_tile(grid, tile, fw, dL_dcolor.empty() ? nullptr : dL_dcolor.data(),
+                  dL_dalpha.empty() ? nullptr : dL_dalpha.data(),
+                  dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads.data());
+
+  const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
+  const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
+  const Vec3<float> t(cam.t_cw[0], cam.t_cw[1], cam.t_cw[2]);
+  const auto cc = cam.center();
+  const Vec3<float> center(cc[0], cc[1], cc[2]);
+  const bool sh_mode = g.color_mode == ColorMode::SphericalHarmonics;
+  const int sh_degree = sh_mode ? (s.active_sh_degree < 0 ? g.sh_degree : s.active_sh_degree) : 0;
+
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int64_t i = 0; i < static_cast<int64_t>(n); ++i) {
+    if (!fw.visible[i]) continue;
+    EntryGrad sum{};
+    for (int32_t e = fw.gaussian_offsets[i]; e < fw.gaussian_offsets[i + 1]; ++e) {
+      const EntryGrad& eg = entry_grads[fw.entry_of_gaussian[e]];
+      for (int k = 0; k < 2; ++k) sum.mean2d[k] += eg.mean2d[k], sum.abs_mean2d[k] += eg.abs_mean2d[k];
+      for (int k = 0; k < 3; ++k) sum.conic[k] += eg.conic[k], sum.rgb[k] += eg.rgb[k];
+      sum.opacity += eg.opacity;
+      sum.depth += eg.depth;
+    }
+    grads.means2d[2 * i] = sum.mean2d[0];
+    grads.means2d[2 * i + 1] = sum.mean2d[1];
+    grads.absgrad[i] = std::hypot(sum.abs_mean2d[0], sum.abs_mean2d[1]);
+
+    // Opacity: o = sigmoid(logit).
+    const float o = fw.opacity[i];
+    grads.opacity_logits[i] = sum.opacity * o * (1.0f - o);
+
+    // Color: the clamp passes the gradient only where it was inactive.
+    Vec3<float> d_rgb;
+    for (int ch = 0; ch < 3; ++ch) d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : sum.rgb[ch];
+    const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
+    Vec3<float> d_mean = Vec3<float>::Zero();
+    float* d_colors = &grads.colors[color_stride * i];
+    if (sh_mode) {
+      evaluate_color_sh_vjp(sh_degree, &g.colors[color_stride * i], mean, center, d_rgb, d_colors, d_mean);
+    } else {
+      for (int ch = 0; ch < 3; ++ch) d_colors[ch] = d_rgb[ch];
+    }
+
+    // Conic → 2D covariance → camera-space point and covariance → 3D parameters.
+    const Vec3<float> conic(fw.conics[3 * i], fw.conics[3 * i + 1], fw.conics[3 * i + 2]);
+    const Mat2<float> d_cov2d = conic_vjp(conic, Vec3<float>(sum.conic[0], sum.conic[1], sum.conic[2]));
+    const Vec3<float> p = W * mean + t;
+    const Mat3<float> Sigma = covariance_3d<float>(&g.log_scales[3 * i], &g.quats[4 * i]);
+    const Mat3<float> V = W * Sigma * W.transpose();
+    Vec3<float> d_p;
+    Mat3<float> d_V;
+    project_ewa_vjp(p, V, K, Vec2<float>(sum.mean2d[0], sum.mean2d[1]), d_cov2d, sum.depth, d_p, d_V);
+    d_mean += W.transpose() * d_p;
+    covariance_3d_vjp(&g.log_scales[3 * i], &g.quats[4 * i], W.transpose() * d_V * W,
+                      &grads.log_scales[3 * i], &grads.quats[4 * i]);
+    for (int k = 0; k < 3; ++k) grads.means[3 * i + k] = d_mean[k];
+  }
+}
+
+}  // namespace desplat

@@ -1,0 +1,231 @@
+// Forward pass: per-Gaussian projection, tile binning, per-tile front-to-back blending.
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+#include "raster/fast_exp.hpp"
+#include "raster/stage_math.hpp"
+#include "raster/tiles.hpp"
+
+namespace desplat {
+namespace {
+using namespace raster;
+
+int effective_sh_degree(const GaussianView& g, const RasterSettings& s) {
+  if (g.color_mode == ColorMode::RGB) return 0;
+  const int d = s.active_sh_degree < 0 ? g.sh_degree : s.active_sh_degree;
+  if (d > g.sh_degree)
+    throw std::invalid_argument("active SH degree " + std::to_string(d) +
+                                " exceeds the stored SH degree " + std::to_string(g.sh_degree));
+  return d;
+}
+
+// Projection, culling, color and opacity for every Gaussian (REFERENCE.md §3).
+void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& s, int sh_degree,
+                RasterOutput& out) {
+  const int64_t n = static_cast<int64_t>(g.size());
+  const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
+  const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
+  const Vec3<float> t(cam.t_cw[0], cam.t_cw[1], cam.t_cw[2]);
+  const auto c = cam.center();
+  const Vec3<float> center(c[0], c[1], c[2]);
+  const bool sh_mode = g.color_mode == ColorMode::SphericalHarmonics;
+  const int color_stride = g.color_floats_per_gaussian();
+
+#pragma omp parallel for num_threads(thread_count(s)) schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
+    out.radii[2 * i] = out.radii[2 * i + 1] = 0;
+    out.visible[i] = 0;
+    const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
+    const Vec3<float> p = W * mean + t;
+    if (!(p[2] > s.near_plane && p[2] < s.far_plane)) continue;  // also rejects NaN
+    const Mat3<float> V = W * covariance_3d<float>(&g.log_scales[3 * i], &g.quats[4 * i]) * W.transpose();
+    const Projection<float> proj = project_ewa<float>(p, V, K, s.eps2d);
+    float det = 0;
+    const Vec3<float> conic = conic_from_cov2d<float>(proj.cov2d, &det);
+    if (!(det > 0) || !conic.allFinite() || !proj.mean2d.allFinite()) continue;
+    const float rx = std::min(kMaxRadius, std::ceil(kExtentSigmas * std::sqrt(proj.cov2d(0, 0))));
+    const float ry = std::min(kMaxRadius, std::ceil(kExtentSigmas * std::sqrt(proj.cov2d(1, 1))));
+    if (!(rx > 0 && ry > 0)) continue;
+    const float mx = proj.mean2d[0], my = proj.mean2d[1];
+    if (mx + rx <= 0 || mx - rx >= cam.width || my + ry <= 0 || my - ry >= cam.height) continue;
+
+    const float opacity = sigmoid(g.opacity_logits[i]);
+    Vec3<float> color = evaluate_color<float>(sh_mode, sh_degree, &g.colors[color_stride * i], mean, center);
+    for (int ch = 0; ch < 3; ++ch) {
+      const float lo = 0.0f, hi = sh_mode ? INFINITY : 1.0f;
+      out.color_clamped[3 * i + ch] = !(color[ch] >= lo && color[ch] <= hi);
+      color[ch] = std::clamp(std::isfinite(color[ch]) ? color[ch] : 0.0f, lo, hi);
+    }
+    out.means2d[2 * i] = mx;
+    out.means2d[2 * i + 1] = my;
+    for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = conic[k];
+    out.radii[2 * i] = static_cast<int32_t>(rx);
+    out.radii[2 * i + 1] = static_cast<int32_t>(ry);
+    out.depths[i] = p[2];
+    out.opacity[i] = opacity;
+    for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
+    out.visible[i] = 1;
+  }
+}
+
+// Builds the depth-sorted per-tile work lists. Gaussians are sorted once by
+// (depth, id) and then appended to their tiles in that order, which yields the same
+// per-tile order as gsplat's radix sort of (tile, depth) keys.
+void bin_gaussians(const TileGrid& grid, RasterOutput& out) {
+  const int64_t n = static_cast<int64_t>(out.visible.size());
+  out.gaussian_offsets.assign(n + 1, 0);
+  std::vector<int32_t> order;
+  order.reserve(n);
+  for (int64_t i = 0; i < n; ++i) {
+    if (!out.visible[i]) continue;
+    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
+                                 out.radii[2 * i + 1]);
+    out.gaussian_offsets[i + 1] = r.area();
+    if (r.area() > 0) order.push_back(static_cast<int32_t>(i));
+    else out.visible[i] = 0;
+  }
+  std::partial_sum(out.gaussian_offsets.begin(), out.gaussian_offsets.end(), out.gaussian_offsets.begin());
+  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+    return out.depths[a] < out.depths[b] || (out.depths[a] == out.depths[b] && a < b);
+  });
+
+  const int64_t entries = out.gaussian_offsets[n];
+  if (entries > INT32_MAX) throw std::runtime_error("too many tile–Gaussian intersections");
+  out.tile_offsets.assign(grid.count() + 1, 0);
+  for (int32_t i : order) {
+    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
+                                 out.radii[2 * i + 1]);
+    for (int ty = r.y0; ty < r.y1; ++ty)
+      for (int tx = r.x0; tx < r.x1; ++tx) ++out.tile_offsets[ty * grid.tiles_x + tx + 1];
+  }
+  std::partial_sum(out.tile_offsets.begin(), out.tile_offsets.end(), out.tile_offsets.begin());
+  out.tile_entries.resize(entries);
+  out.entry_of_gaussian.resize(entries);
+  std::vector<int32_t> cursor(out.tile_offsets.begin(), out.tile_offsets.end() - 1);
+  for (int32_t i : order) {
+    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
+                                 out.radii[2 * i + 1]);
+    int32_t local = out.gaussian_offsets[i];
+    for (int ty = r.y0; ty < r.y1; ++ty)
+      for (int tx = r.x0; tx < r.x1; ++tx) {
+        const int32_t pos = cursor[ty * grid.tiles_x + tx]++;
+        out.tile_entries[pos] = i;
+        out.entry_of_gaussian[local++] = pos;
+      }
+  }
+}
+
+// Front-to-back blending of one tile. Pixel state lives in 16×16 arrays; the inner
+// loop over the 16 pixels of a row is branch-free so it vectorizes.
+int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
+  constexpr int S = kTileSize;
+  const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
+  const int cols = std::min(S, out.width - x0), rows = std::min(S, out.height - y0);
+  alignas(64) float T[S * S], Cr[S * S], Cg[S * S], Cb[S * S], D[S * S];
+  alignas(64) int32_t active[S * S], last[S * S];
+  alignas(64) float px_center[S];
+  for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
+  int remaining = 0;
+  for (int r = 0; r < S; ++r)
+    for (int col = 0; col < S; ++col) {
+      const int j = r * S + col;
+      T[j] = 1, Cr[j] = Cg[j] = Cb[j] = D[j] = 0, last[j] = -1;
+      active[j] = (r < rows && col < cols);
+      remaining += active[j];
+    }
+
+  int64_t evaluated = 0;
+  const int begin = out.tile_offsets[tile], end = out.tile_offsets[tile + 1];
+  for (int k = 0; k < end - begin && remaining > 0; ++k) {
+    const int32_t g = out.tile_entries[begin + k];
+    const float mx = out.means2d[2 * g], my = out.means2d[2 * g + 1];
+    const float a = out.conics[3 * g], b = out.conics[3 * g + 1], c = out.conics[3 * g + 2];
+    const float o = out.opacity[g], z = out.depths[g];
+    const float cr = out.rgb[3 * g], cg = out.rgb[3 * g + 1], cb = out.rgb[3 * g + 2];
+    int r0, r1;
+    box_rows_in_tile(my, out.radii[2 * g + 1], y0, rows, r0, r1);
+    for (int r = r0; r <= r1; ++r) {
+      const float dy = my - (y0 + r + 0.5f);
+      const int row = r * S;
+      int finished = 0;
+#pragma omp simd reduction(+ : finished)
+      for (int col = 0; col < S; ++col) {
+        const int j = row + col;
+        const float dx = mx - px_center[col];
+        const float sigma = gaussian_sigma(a, b, c, dx, dy);
+        const float alpha = std::min(kAlphaMax, o * fast_exp_nonpositive(-sigma));
+        const float t = T[j];
+        const float next_t = t * (1.0f - alpha);
+        const bool hit = active[j] && sigma >= 0.0f && alpha >= kAlphaMin;
+        const bool finish = hit && next_t <= kTransmittanceMin;  // not blended
+        const bool blend = hit && !finish;
+        const float w = blend ? alpha * t : 0.0f;
+        Cr[j] += w * cr;
+        Cg[j] += w * cg;
+        Cb[j] += w * cb;
+        D[j] += w * z;
+        T[j] = blend ? next_t : t;
+        last[j] = blend ? k : last[j];
+        active[j] = finish ? 0 : active[j];
+        finished += finish;
+      }
+      remaining -= finished;
+    }
+    evaluated += int64_t(r1 - r0 + 1) * S;
+  }
+
+  for (int r = 0; r < rows; ++r)
+    for (int col = 0; col < cols; ++col) {
+      const int j = r * S + col;
+      const int64_t p = int64_t(y0 + r) * out.width + (x0 + col);
+      out.color[3 * p] = Cr[j];
+      out.color[3 * p + 1] = Cg[j];
+      out.color[3 * p + 2] = Cb[j];
+      out.alpha[p] = 1.0f - T[j];
+      out.depth[p] = D[j];
+      out.final_transmittance[p] = T[j];
+      out.last_contributor[p] = last[j];
+    }
+  return evaluated;
+}
+
+}  // namespace
+
+void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
+                       RasterOutput& out) {
+  g.validate();
+  cam.validate();
+  const int sh_degree = effective_sh_degree(g, s);
+  const size_t n = g.size();
+  const size_t pixels = size_t(cam.width) * cam.height;
+
+  out.width = cam.width;
+  out.height = cam.height;
+  out.color.assign(3 * pixels, 0.0f);
+  out.alpha.assign(pixels, 0.0f);
+  out.depth.assign(pixels, 0.0f);
+  out.final_transmittance.assign(pixels, 1.0f);
+  out.last_contributor.assign(pixels, -1);
+  out.means2d.assign(2 * n, 0.0f);
+  out.conics.assign(3 * n, 0.0f);
+  out.radii.assign(2 * n, 0);
+  out.depths.assign(n, 0.0f);
+  out.visible.assign(n, 0);
+  out.rgb.assign(3 * n, 0.0f);
+  out.opacity.assign(n, 0.0f);
+  out.color_clamped.assign(3 * n, 0);
+
+  preprocess(g, cam, s, sh_degree, out);
+  const TileGrid grid(cam.width, cam.height);
+  bin_gaussians(grid, out);
+
+  int64_t evaluated = 0;
+#pragma omp parallel for num_threads(thread_count(s)) schedule(dynamic, 1) reduction(+ : evaluated)
+  for (int tile = 0; tile < grid.count(); ++tile) evaluated += blend_tile(grid, tile, out);
+  out.evaluated_pairs = evaluated;
+}
+
+}  // namespace desplat

@@ -1,0 +1,230 @@
+// Hand-written gradients of the whole kernel against (1) exact derivatives of the
+// brute-force reference via ceres::Jet and (2) central finite differences of the
+// kernel itself.
+#include <gtest/gtest.h>
+
+#include "support/jet_gradient.hpp"
+#include "support/scenes.hpp"
+
+namespace desplat::test {
+namespace {
+
+struct Loss {
+  std::vector<float> wC, wA, wD;  // ∂L/∂color, ∂L/∂alpha, ∂L/∂depth
+};
+
+Loss random_loss(std::mt19937& rng, const Camera& cam) {
+  std::normal_distribution<float> n(0, 1);
+  const size_t pixels = size_t(cam.width) * cam.height;
+  Loss l{std::vector<float>(3 * pixels), std::vector<float>(pixels), std::vector<float>(pixels)};
+  for (auto* v : {&l.wC, &l.wA, &l.wD})
+    for (float& x : *v) x = n(rng);
+  return l;
+}
+
+const char* kGroups[] = {"means", "log_scales", "quats", "opacity_logits", "colors"};
+
+// Compares gradients group by group. Float32 accumulates each gradient over every
+// pixel the Gaussian touches (hundreds of terms, each from ~100 flops) and the
+// backward pass reconstructs transmittance by division; the expected relative error
+// is ~1e-5 of the group's largest gradient. 2e-4·max|g| + 1e-5 allows for cancelling
+// sums while a wrong term (a missed factor, sign, or branch) shows up as O(1).
+void expect_gradients_match(const GaussianSet& g, const RasterGradients& got, const std::vector<double>& want,
+                            double rel_tol, const std::string& label) {
+  const std::vector<float> flat = flatten_grads(got);
+  ASSERT_EQ(flat.size(), want.size());
+  const size_t sizes[] = {g.means.size(), g.log_scales.size(), g.quats.size(), g.opacity_logits.size(),
+                          g.colors.size()};
+  size_t at = 0;
+  for (int grp = 0; grp < 5; ++grp) {
+    double scale = 0;
+    for (size_t i = at; i < at + sizes[grp]; ++i) scale = std::max(scale, std::abs(want[i]));
+    for (size_t i = at; i < at + sizes[grp]; ++i) {
+      ASSERT_TRUE(std::isfinite(flat[i])) << label << " " << kGroups[grp];
+      EXPECT_NEAR(flat[i], want[i], rel_tol * scale + 1e-5)
+          << label << " " << kGroups[grp] << " element " << (i - at) << " (group max " << scale << ")";
+    }
+    EXPECT_GT(scale, 0) << label << " " << kGroups[grp] << ": the scene must exercise this gradient";
+    at += sizes[grp];
+  }
+}
+
+struct Case {
+  int width, height, count;
+  float focal;
+  ColorMode mode;
+  int sh_degree, active_degree;
+  float logit_max;  // high values exercise the 0.999 α clamp and early termination
+};
+
+class BackwardVsJet : public ::testing::TestWithParam<Case> {};
+
+TEST_P(BackwardVsJet, MatchesAutodiffReference) {
+  const Case c = GetParam();
+  for (int seed = 0; seed < 3; ++seed) {
+    std::mt19937 rng(77 + seed * 13 + c.count);
+    const Camera cam = random_camera(rng, c.width, c.height, c.focal);
+    SceneSpec spec;
+    spec.count = c.count;
+    spec.mode = c.mode;
+    spec.sh_degree = c.sh_degree;
+    spec.spread = 1.0f;
+    spec.log_scale_min = -2.0f;
+    spec.logit_max = c.logit_max;
+    spec.sh_sigma = 0.5f;  // some colors fall below zero: the clamp is exercised
+    const GaussianSet g = random_gaussians(rng, spec);
+    RasterSettings s;
+    s.active_sh_degree = c.active_degree;
+    const Loss loss = random_loss(rng, cam);
+    RasterOutput out;
+    rasterize_forward(g.view(), cam, s, out);
+    RasterGradients grads;
+    rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, loss.wD, grads);
+    const std::vector<double> want = jet_gradient(g, cam, s, loss.wC, loss.wA, loss.wD);
+    expect_gradients_match(g, grads, want, 2e-4, "seed " + std::to_string(seed));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    RandomScenes, BackwardVsJet,
+    ::testing::Values(Case{20, 18, 6, 18, ColorMode::SphericalHarmonics, 3, 3, 2.0f},
+                      Case{33, 17, 8, 25, ColorMode::SphericalHarmonics, 3, 2, 2.0f},
+                      Case{24, 24, 10, 20, ColorMode::SphericalHarmonics, 1, 1, 9.0f},
+                      Case{19, 21, 7, 20, ColorMode::RGB, 0, -1, 4.0f}));
+
+// Only ∂L/∂depth, only ∂L/∂alpha: each output's backward path alone.
+TEST(Backward, EachOutputAlone) {
+  std::mt19937 rng(5);
+  const Camera cam = random_camera(rng, 21, 17, 20);
+  SceneSpec spec;
+  spec.count = 6;
+  spec.spread = 1.0f;
+  spec.log_scale_min = -2.0f;
+  const GaussianSet g = random_gaussians(rng, spec);
+  const Loss loss = random_loss(rng, cam);
+  const std::vector<float> zero3(loss.wC.size(), 0.0f), zero1(loss.wA.size(), 0.0f);
+  RasterSettings s;
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, s, out);
+  RasterGradients grads;
+  rasterize_backward(g.view(), cam, s, out, {}, loss.wA, {}, grads);
+  // Alpha does not depend on color: that group is exactly zero; the others match.
+  for (float v : grads.colors) EXPECT_EQ(v, 0.0f);
+  const std::vector<double> want_a = jet_gradient(g, cam, s, zero3, loss.wA, zero1);
+  const std::vector<float> flat = flatten_grads(grads);
+  double scale = 0;
+  for (double w : want_a) scale = std::max(scale, std::abs(w));
+  for (size_t i = 0; i < flat.size(); ++i) EXPECT_NEAR(flat[i], want_a[i], 2e-4 * scale + 1e-5) << i;
+
+  rasterize_backward(g.view(), cam, s, out, {}, {}, loss.wD, grads);
+  const std::vector<double> want_d = jet_gradient(g, cam, s, zero3, zero1, loss.wD);
+  const std::vector<float> flat_d = flatten_grads(grads);
+  scale = 0;
+  for (double w : want_d) scale = std::max(scale, std::abs(w));
+  for (size_t i = 0; i < flat_d.size(); ++i) EXPECT_NEAR(flat_d[i], want_d[i], 2e-4 * scale + 1e-5) << i;
+}
+
+// A scene built to be smooth in every parameter (all α in (1/255, 0.999), transmittance
+// far above 1e-4, colors inside the clamp, projections inside the FOV clamp), so
+// central differences of the float kernel are meaningful.
+TEST(Backward, MatchesCentralFiniteDifferences) {
+  Camera cam;
+  cam.width = 16;
+  cam.height = 12;
+  cam.fx = cam.fy = 10;
+  cam.cx = 8.2f;
+  cam.cy = 5.9f;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1, 1);
+  GaussianSet g;
+  g.sh_degree = 1;
+  g.resize(4);
+  for (int i = 0; i < 4; ++i) {
+    g.means[3 * i] = 0.3f * u(rng), g.means[3 * i + 1] = 0.2f * u(rng), g.means[3 * i + 2] = 3.0f + 0.5f * i;
+    for (int k = 0; k < 3; ++k) g.log_scales[3 * i + k] = std::log(3.0f + 0.5f * u(rng));
+    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = u(rng);
+    g.opacity_logits[i] = -0.5f + 0.5f * u(rng);
+  }
+  for (float& c : g.colors) c = 0.2f * u(rng);
+  const Loss loss = random_loss(rng, cam);
+  RasterSettings s;
+
+  auto loss_of = [&](const GaussianSet& gs) {
+    RasterOutput o;
+    rasterize_forward(gs.view(), cam, s, o);
+    double L = 0;
+    for (size_t i = 0; i < o.color.size(); ++i) L += double(o.color[i]) * loss.wC[i];
+    for (size_t i = 0; i < o.alpha.size(); ++i) L += double(o.alpha[i]) * loss.wA[i] + double(o.depth[i]) * loss.wD[i];
+    return L;
+  };
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, s, out);
+  for (size_t i = 0; i < out.alpha.size(); ++i) ASSERT_LT(out.alpha[i], 0.999f);  // smooth regime
+  RasterGradients grads;
+  rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, loss.wD, grads);
+  const std::vector<float> analytic = flatten_grads(grads);
+
+  // h = 1e-2 balances truncation error (O(h²)·third derivative, ~1e-4 here) against
+  // float32 round-off in L (~1e-6·Σ|w| ≈ 1e-3 over 2h), so ~1% of the largest gradient.
+  constexpr float h = 1e-2f;
+  std::vector<double> numeric;
+  for (int grp = 0; grp < 5; ++grp) {
+    std::vector<float>* v[] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors};
+    for (size_t i = 0; i < v[grp]->size(); ++i) {
+      GaussianSet gp = g, gm = g;
+      std::vector<float>* vp[] = {&gp.means, &gp.log_scales, &gp.quats, &gp.opacity_logits, &gp.colors};
+      std::vector<float>* vm[] = {&gm.means, &gm.log_scales, &gm.quats, &gm.opacity_logits, &gm.colors};
+      (*vp[grp])[i] += h;
+      (*vm[grp])[i] -= h;
+      numeric.push_back((loss_of(gp) - loss_of(gm)) / (2.0 * h));
+    }
+  }
+  expect_gradients_match(g, grads, numeric, 1e-2, "finite differences");
+  // And the autodiff reference agrees with both on this scene.
+  expect_gradients_match(g, grads, jet_gradient(g, cam, s, loss.wC, loss.wA, loss.wD), 2e-4, "jet");
+  (void)analytic;
+}
+
+// The densification statistic by its definition: run the backward pass once per pixel
+// with only that pixel's loss weights, and sum the absolute per-pixel ∂L/∂μ2d.
+TEST(Backward, AbsGradIsSumOfPerPixelAbsoluteGradients) {
+  std::mt19937 rng(3);
+  const Camera cam = random_camera(rng, 18, 14, 18);
+  SceneSpec spec;
+  spec.count = 5;
+  spec.spread = 0.8f;
+  spec.log_scale_min = -1.8f;
+  const GaussianSet g = random_gaussians(rng, spec);
+  const Loss loss = random_loss(rng, cam);
+  RasterSettings s;
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, s, out);
+  RasterGradients full;
+  rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, loss.wD, full);
+
+  const size_t pixels = size_t(cam.width) * cam.height;
+  std::vector<double> abs_x(spec.count, 0.0), abs_y(spec.count, 0.0);
+  RasterGradients one;
+  for (size_t p = 0; p < pixels; ++p) {
+    std::vector<float> wC(3 * pixels, 0.0f), wA(pixels, 0.0f), wD(pixels, 0.0f);
+    for (int ch = 0; ch < 3; ++ch) wC[3 * p + ch] = loss.wC[3 * p + ch];
+    wA[p] = loss.wA[p];
+    wD[p] = loss.wD[p];
+    rasterize_backward(g.view(), cam, s, out, wC, wA, wD, one);
+    for (int i = 0; i < spec.count; ++i) {
+      abs_x[i] += std::abs(one.means2d[2 * i]);
+      abs_y[i] += std::abs(one.means2d[2 * i + 1]);
+    }
+  }
+  int nonzero = 0;
+  for (int i = 0; i < spec.count; ++i) {
+    const double want = std::hypot(abs_x[i], abs_y[i]);
+    EXPECT_NEAR(full.absgrad[i], want, 1e-4 * want + 1e-6) << "Gaussian " << i;
+    EXPECT_GE(full.absgrad[i] * (1 + 1e-5), std::hypot(full.means2d[2 * i], full.means2d[2 * i + 1]));
+    nonzero += want > 0;
+  }
+  EXPECT_GE(nonzero, 3);
+}
+
+}  // namespace
+}  // namespace desplat::test

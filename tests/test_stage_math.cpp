@@ -1,0 +1,148 @@
+// Each hand-written stage VJP against ceres::Jet derivatives of the templated forward
+// function, evaluated at the same float inputs in double precision.
+#include <ceres/jet.h>
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "raster/fast_exp.hpp"
+#include "raster/stage_math.hpp"
+
+namespace desplat::raster {
+namespace {
+
+template <int N> using Jet = ceres::Jet<double, N>;
+
+// Float VJPs of single stages involve ≤ ~50 flops on O(1) values, so their error is
+// a few float ulps of the largest term: 1e-5 relative to the gradient's magnitude.
+void expect_close(double got, double want, double scale, const char* what, int i) {
+  EXPECT_NEAR(got, want, 1e-5 * std::max(1.0, scale)) << what << " [" << i << "]";
+}
+
+TEST(FastExp, RelativeErrorBelow2e7) {
+  double worst = 0;
+  for (int i = 0; i <= 2000000; ++i) {
+    const float x = -87.0f * float(i) / 2000000.0f;
+    const double exact = std::exp(double(x));
+    worst = std::max(worst, std::abs(fast_exp_nonpositive(x) - exact) / exact);
+  }
+  EXPECT_LT(worst, 2e-7);
+  EXPECT_EQ(fast_exp_nonpositive(0.0f), 1.0f);
+  EXPECT_EQ(fast_exp_nonpositive(-100.0f), 0.0f);
+  EXPECT_EQ(fast_exp_nonpositive(-INFINITY), 0.0f);
+}
+
+TEST(StageVjp, QuaternionToRotation) {
+  std::mt19937 rng(1);
+  std::normal_distribution<float> n(0, 1);
+  for (int trial = 0; trial < 50; ++trial) {
+    float q[4], G[9];
+    for (float& v : q) v = n(rng) * (trial % 5 == 0 ? 1e-3f : 1.0f);
+    for (float& v : G) v = n(rng);
+    Jet<4> qj[4];
+    for (int i = 0; i < 4; ++i) qj[i] = Jet<4>(q[i], i);
+    const Mat3<Jet<4>> R = rotation_from_unit_quat<Jet<4>>(normalize_quat<Jet<4>>(qj));
+    Jet<4> L(0);
+    Mat3<float> Gm;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) L += R(r, c) * double(G[3 * r + c]), Gm(r, c) = G[3 * r + c];
+    const Vec4<float> dq = quat_vjp(q, Gm);
+    for (int i = 0; i < 4; ++i) expect_close(dq[i], L.v[i], L.v.norm(), "dq", i);
+  }
+}
+
+TEST(StageVjp, Covariance3d) {
+  std::mt19937 rng(2);
+  std::normal_distribution<float> n(0, 1);
+  for (int trial = 0; trial < 50; ++trial) {
+    float s[3], q[4], G[9];
+    for (float& v : s) v = n(rng) - 1.0f;
+    for (float& v : q) v = n(rng);
+    for (float& v : G) v = n(rng);
+    Jet<7> sj[3], qj[4];
+    for (int i = 0; i < 3; ++i) sj[i] = Jet<7>(s[i], i);
+    for (int i = 0; i < 4; ++i) qj[i] = Jet<7>(q[i], 3 + i);
+    const Mat3<Jet<7>> Sigma = covariance_3d<Jet<7>>(sj, qj);
+    Jet<7> L(0);
+    Mat3<float> Gm;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) L += Sigma(r, c) * double(G[3 * r + c]), Gm(r, c) = G[3 * r + c];
+    float ds[3] = {0, 0, 0}, dq[4] = {0, 0, 0, 0};
+    covariance_3d_vjp(s, q, Gm, ds, dq);
+    for (int i = 0; i < 3; ++i) expect_close(ds[i], L.v[i], L.v.norm(), "ds", i);
+    for (int i = 0; i < 4; ++i) expect_close(dq[i], L.v[3 + i], L.v.norm(), "dq", i);
+  }
+}
+
+// Projection with the field-of-view clamp both inactive and active.
+TEST(StageVjp, EwaProjectionAndConic) {
+  std::mt19937 rng(3);
+  std::normal_distribution<float> n(0, 1);
+  const PinholeIntrinsics K{50.f, 55.f, 31.f, 22.f, 64, 48};
+  for (int trial = 0; trial < 60; ++trial) {
+    const float spread = trial % 3 == 0 ? 4.0f : 0.4f;  // every third one off-screen: clamp active
+    const Vec3<float> p(n(rng) * spread, n(rng) * spread, 2.0f + std::abs(n(rng)));
+    Eigen::Matrix3f A = Eigen::Matrix3f::Random() * 0.3f;
+    const Mat3<float> V = A * A.transpose() + 0.01f * Mat3<float>::Identity();
+    const Vec2<float> dm(n(rng), n(rng));
+    const Vec3<float> dconic(n(rng), n(rng), n(rng));
+    const float ddepth = n(rng);
+    // Jet over p (3) and the 6 independent entries of V.
+    using J = Jet<9>;
+    Vec3<J> pj(J(p[0], 0), J(p[1], 1), J(p[2], 2));
+    Mat3<J> Vj;
+    int k = 3;
+    for (int r = 0; r < 3; ++r)
+      for (int c = r; c < 3; ++c) {
+        Vj(r, c) = J(V(r, c), k++);
+        Vj(c, r) = Vj(r, c);
+      }
+    const Projection<J> proj = project_ewa<J>(pj, Vj, K, 0.3f);
+    const Vec3<J> conic = conic_from_cov2d<J>(proj.cov2d);
+    const J L = proj.mean2d[0] * double(dm[0]) + proj.mean2d[1] * double(dm[1]) + conic[0] * double(dconic[0]) +
+                conic[1] * double(dconic[1]) + conic[2] * double(dconic[2]) + proj.depth * double(ddepth);
+
+    const Projection<float> pf = project_ewa<float>(p, V, K, 0.3f);
+    const Vec3<float> conic_f = conic_from_cov2d<float>(pf.cov2d);
+    Vec3<float> d_p;
+    Mat3<float> d_V;
+    project_ewa_vjp(p, V, K, dm, conic_vjp(conic_f, dconic), ddepth, d_p, d_V);
+    const double scale = L.v.norm();
+    for (int i = 0; i < 3; ++i) expect_close(d_p[i], L.v[i], scale, "d_p", i);
+    k = 3;
+    for (int r = 0; r < 3; ++r)
+      for (int c = r; c < 3; ++c, ++k) {
+        const double got = r == c ? d_V(r, c) : d_V(r, c) + d_V(c, r);  // symmetric entry
+        expect_close(got, L.v[k], scale, "d_V", k);
+      }
+  }
+}
+
+TEST(StageVjp, ShColorAllDegrees) {
+  std::mt19937 rng(4);
+  std::normal_distribution<float> n(0, 1);
+  for (int degree = 0; degree <= 3; ++degree)
+    for (int trial = 0; trial < 20; ++trial) {
+      const int K = (degree + 1) * (degree + 1);
+      std::vector<float> coeffs(3 * K);
+      for (float& c : coeffs) c = n(rng) * 0.5f;
+      const Vec3<float> mean(n(rng), n(rng), n(rng)), center(n(rng), n(rng), n(rng));
+      const Vec3<float> dc(n(rng), n(rng), n(rng));
+      using J = Jet<51>;  // 48 coefficients + 3 mean coordinates
+      std::vector<J> cj(3 * K);
+      for (int i = 0; i < 3 * K; ++i) cj[i] = J(coeffs[i], i);
+      const Vec3<J> mj(J(mean[0], 48), J(mean[1], 49), J(mean[2], 50));
+      const Vec3<J> cen{J(center[0]), J(center[1]), J(center[2])};
+      const Vec3<J> color = evaluate_color<J>(true, degree, cj.data(), mj, cen);
+      const J L = color[0] * double(dc[0]) + color[1] * double(dc[1]) + color[2] * double(dc[2]);
+      std::vector<float> dcoeffs(3 * K, 0.0f);
+      Vec3<float> dmean = Vec3<float>::Zero();
+      evaluate_color_sh_vjp(degree, coeffs.data(), mean, center, dc, dcoeffs.data(), dmean);
+      const double scale = L.v.norm();
+      for (int i = 0; i < 3 * K; ++i) expect_close(dcoeffs[i], L.v[i], scale, "dcoeff", i);
+      for (int i = 0; i < 3; ++i) expect_close(dmean[i], L.v[48 + i], scale, "dmean", i);
+    }
+}
+
+}  // namespace
+}  // namespace desplat::raster
