@@ -16,7 +16,9 @@ inline float fast_exp_nonpositive(float x) {
   constexpr float kLn2Lo = -2.12194440e-4f;
   const bool underflow = x < -87.0f;
   x = x < -87.0f ? -87.0f : x;
-  const float n = __builtin_roundf(x * kLog2e);
+  // Round to nearest by adding and removing 1.5·2²³ (no libm call, so it vectorizes).
+  constexpr float kRoundMagic = 12582912.0f;
+  const float n = (x * kLog2e + kRoundMagic) - kRoundMagic;
   const float r = (x - n * kLn2Hi) - n * kLn2Lo;
   float p = 1.0f / 5040.0f;
   p = p * r + 1.0f / 720.0f;

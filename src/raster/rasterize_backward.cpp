@@ -67,52 +67,64 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     const float a = fw.conics[3 * g], b = fw.conics[3 * g + 1], c = fw.conics[3 * g + 2];
     const float o = fw.opacity[g], z = fw.depths[g];
     const float cr = fw.rgb[3 * g], cg = fw.rgb[3 * g + 1], cb = fw.rgb[3 * g + 2];
-    float s_r = 0, s_g = 0, s_b = 0, s_z = 0, s_o = 0, s_a = 0, s_b2 = 0, s_c = 0;
-    float s_mx = 0, s_my = 0, s_absx = 0, s_absy = 0;
+    // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
+    // and the lanes are summed in a fixed order afterwards (deterministic).
+    enum { kR, kG, kB, kZ, kO, kA, kB2, kC, kMx, kMy, kAbsX, kAbsY, kSums };
+    alignas(64) float acc[kSums][S] = {};
     int r0, r1;
     box_rows_in_tile(my, fw.radii[2 * g + 1], y0, rows, r0, r1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-#pragma omp simd reduction(+ : s_r, s_g, s_b, s_z, s_o, s_a, s_b2, s_c, s_mx, s_my, s_absx, s_absy)
+#pragma omp simd
       for (int col = 0; col < S; ++col) {
         const int j = row + col;
         const float dx = mx - px_center[col];
         const float sigma = gaussian_sigma(a, b, c, dx, dy);
         const float vis = fast_exp_nonpositive(-sigma);
-        const float alpha = std::min(kAlphaMax, o * vis);
-        const bool hit = k <= last[j] && sigma >= 0.0f && alpha >= kAlphaMin;
+        const float alpha = clamp_alpha(o * vis);
+        // Masks as 0/1 floats, built as chained selects: the body stays free of
+        // branches and GCC vectorizes it (a `&`-combined condition defeats it).
+        const float in_list = k <= last[j] ? 1.0f : 0.0f;
+        const float in_sigma = sigma >= 0.0f ? in_list : 0.0f;
+        const float hit = alpha >= kAlphaMin ? in_sigma : 0.0f;
         const float ra = 1.0f / (1.0f - alpha);
         const float t_before = T[j] * ra;  // transmittance in front of this Gaussian
-        const float w = alpha * t_before;
+        const float w = hit * alpha * t_before;
         // ∂C/∂α = c·T − (blended behind)/(1 − α); ∂A/∂α = T_final/(1 − α).
         const float d_alpha = (cr * t_before - Br[j] * ra) * gr[j] + (cg * t_before - Bg[j] * ra) * gg[j] +
                               (cb * t_before - Bb[j] * ra) * gb[j] + (z * t_before - Bd[j] * ra) * gd[j] +
                               T_final[j] * ra * ga[j];
-        const bool unclamped = hit && o * vis <= kAlphaMax;
-        const float d_sigma = unclamped ? -d_alpha * o * vis : 0.0f;
+        const float unclamped = o * vis <= kAlphaMax ? hit : 0.0f;
+        const float d_sigma = -unclamped * d_alpha * o * vis;
         const float gmx = d_sigma * (a * dx + b * dy);
         const float gmy = d_sigma * (b * dx + c * dy);
-        s_r += hit ? w * gr[j] : 0.0f;
-        s_g += hit ? w * gg[j] : 0.0f;
-        s_b += hit ? w * gb[j] : 0.0f;
-        s_z += hit ? w * gd[j] : 0.0f;
-        s_o += unclamped ? d_alpha * vis : 0.0f;
-        s_a += 0.5f * d_sigma * dx * dx;
-        s_b2 += d_sigma * dx * dy;
-        s_c += 0.5f * d_sigma * dy * dy;
-        s_mx += gmx;
-        s_my += gmy;
-        s_absx += std::abs(gmx);
-        s_absy += std::abs(gmy);
-        Br[j] += hit ? cr * w : 0.0f;
-        Bg[j] += hit ? cg * w : 0.0f;
-        Bb[j] += hit ? cb * w : 0.0f;
-        Bd[j] += hit ? z * w : 0.0f;
-        T[j] = hit ? t_before : T[j];
+        acc[kR][col] += w * gr[j];
+        acc[kG][col] += w * gg[j];
+        acc[kB][col] += w * gb[j];
+        acc[kZ][col] += w * gd[j];
+        acc[kO][col] += unclamped * d_alpha * vis;
+        acc[kA][col] += 0.5f * d_sigma * dx * dx;
+        acc[kB2][col] += d_sigma * dx * dy;
+        acc[kC][col] += 0.5f * d_sigma * dy * dy;
+        acc[kMx][col] += gmx;
+        acc[kMy][col] += gmy;
+        acc[kAbsX][col] += std::abs(gmx);
+        acc[kAbsY][col] += std::abs(gmy);
+        Br[j] += cr * w;
+        Bg[j] += cg * w;
+        Bb[j] += cb * w;
+        Bd[j] += z * w;
+        T[j] = hit > 0.0f ? t_before : T[j];
       }
     }
-    entry_grads[begin + k] = EntryGrad{{s_mx, s_my}, {s_a, s_b2, s_c}, s_o, {s_r, s_g, s_b}, s_z, {s_absx, s_absy}};
+    float sum[kSums];
+    for (int q = 0; q < kSums; ++q) {
+      sum[q] = 0;
+      for (int col = 0; col < S; ++col) sum[q] += acc[q][col];
+    }
+    entry_grads[begin + k] = EntryGrad{{sum[kMx], sum[kMy]}, {sum[kA], sum[kB2], sum[kC]}, sum[kO],
+                                       {sum[kR], sum[kG], sum[kB]}, sum[kZ], {sum[kAbsX], sum[kAbsY]}};
   }
 }
 

@@ -156,7 +156,7 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
         const int j = row + col;
         const float dx = mx - px_center[col];
         const float sigma = gaussian_sigma(a, b, c, dx, dy);
-        const float alpha = std::min(kAlphaMax, o * fast_exp_nonpositive(-sigma));
+        const float alpha = clamp_alpha(o * fast_exp_nonpositive(-sigma));
         const float t = T[j];
         const float next_t = t * (1.0f - alpha);
         const bool hit = active[j] && sigma >= 0.0f && alpha >= kAlphaMin;

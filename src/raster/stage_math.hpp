@@ -136,6 +136,10 @@ template <typename T> T gaussian_sigma(T a, T b, T c, T dx, T dy) {
   return T(0.5) * (a * dx * dx + c * dy * dy) + b * dx * dy;
 }
 
+// α = min(0.999, o·exp(−σ)) given o·exp(−σ); written as a value select (std::min
+// returns a reference, which keeps GCC from vectorizing the pixel loops).
+template <typename T> T clamp_alpha(T raw) { return raw < T(kAlphaMax) ? raw : T(kAlphaMax); }
+
 // --- spherical harmonics (real, degree ≤ 3, gsplat's constants and ordering) -------
 // Fills Y[0..(degree+1)²) for a unit direction d.
 template <typename T> void sh_basis(int degree, const Vec3<T>& d, T* Y) {

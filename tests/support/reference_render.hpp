@@ -112,7 +112,7 @@ RefImage<T> reference_render(const RefGaussians<T>& g, const Camera& cam, const 
         const T sigma = gaussian_sigma<T>(sp.conic[0], sp.conic[1], sp.conic[2], dx, dy);
         if (sigma < T(0)) continue;
         using std::exp;
-        const T alpha = std::min(T(kAlphaMax), sp.opacity * exp(-sigma));
+        const T alpha = clamp_alpha<T>(sp.opacity * exp(-sigma));
         const T next = trans * (T(1) - alpha);
         if (near(value_of(alpha), kAlphaMin) || near(value_of(next), kTransmittanceMin))
           img.near_threshold[pix] = 1;

@@ -1,0 +1,50 @@
+// Image reading and writing with OpenImageIO.
+#include "desplat/image_io.hpp"
+
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace desplat {
+
+FloatImage read_image_rgb(const std::filesystem::path& path) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) throw ImageError("cannot read image " + path.string() + ": " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw ImageError("image " + path.string() + " has no pixels");
+  std::vector<float> raw(size_t(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, raw.data()))
+    throw ImageError("cannot decode image " + path.string() + ": " + in->geterror());
+  FloatImage img{spec.width, spec.height, 3, std::vector<float>(size_t(spec.width) * spec.height * 3)};
+  const size_t pixels = size_t(spec.width) * spec.height;
+  for (size_t p = 0; p < pixels; ++p)
+    for (int c = 0; c < 3; ++c) {
+      const int src = spec.nchannels >= 3 ? c : 0;  // grey (+alpha): replicate
+      const float v = raw[p * spec.nchannels + src];
+      if (!std::isfinite(v)) throw ImageError("image " + path.string() + " contains NaN or Inf");
+      img.pixels[p * 3 + c] = v;
+    }
+  return img;
+}
+
+void write_image(const std::filesystem::path& path, const FloatImage& image) {
+  if (image.pixels.size() != size_t(image.width) * image.height * image.channels || image.width <= 0)
+    throw ImageError("write_image " + path.string() + ": pixel buffer does not match its size");
+  std::vector<uint8_t> bytes(image.pixels.size());
+  for (size_t i = 0; i < bytes.size(); ++i) {
+    const float v = std::isfinite(image.pixels[i]) ? std::clamp(image.pixels[i], 0.0f, 1.0f) : 0.0f;
+    bytes[i] = static_cast<uint8_t>(std::lround(v * 255.0f));
+  }
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  auto out = OIIO::ImageOutput::create(path.string());
+  const OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::UINT8);
+  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, bytes.data()) ||
+      !out->close())
+    throw ImageError("cannot write image " + path.string() + ": " + OIIO::geterror());
+}
+
+}  // namespace desplat
