@@ -1,5 +1,6 @@
 // Forward pass: per-Gaussian projection, tile binning, per-tile front-to-back blending.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <numeric>
 #include <stdexcept>
@@ -71,50 +72,73 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
   }
 }
 
-// Builds the depth-sorted per-tile work lists. Gaussians are sorted once by
-// (depth, id) and then appended to their tiles in that order, which yields the same
-// per-tile order as gsplat's radix sort of (tile, depth) keys.
-void bin_gaussians(const TileGrid& grid, RasterOutput& out) {
+// Builds the depth-sorted per-tile work lists. Visible Gaussians are sorted once by
+// (depth, id) and appended to their tiles in that order, which yields the same per-tile
+// order as gsplat's radix sort of (tile, depth) keys. The fill runs in parallel over
+// bands of tile rows: each thread walks the whole depth order but writes only its own
+// tiles, so there are no races and the result does not depend on the thread count.
+void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(out.visible.size());
+  auto rect_of = [&](int64_t i) {
+    return tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i], out.radii[2 * i + 1]);
+  };
   out.gaussian_offsets.assign(n + 1, 0);
-  std::vector<int32_t> order;
-  order.reserve(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
-    if (!out.visible[i]) continue;
-    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
-                                 out.radii[2 * i + 1]);
-    out.gaussian_offsets[i + 1] = r.area();
-    if (r.area() > 0) order.push_back(static_cast<int32_t>(i));
-    else out.visible[i] = 0;
+    const int area = out.visible[i] ? rect_of(i).area() : 0;
+    out.gaussian_offsets[i + 1] = area;
+    if (area == 0) out.visible[i] = 0;
   }
+  // Depth is > near > 0, so its float bits order like the value: (bits << 32 | id)
+  // sorts by depth, then id, with plain integer compares.
+  std::vector<uint64_t> keys;
+  keys.reserve(n);
+  for (int64_t i = 0; i < n; ++i)
+    if (out.visible[i]) keys.push_back(uint64_t(std::bit_cast<uint32_t>(out.depths[i])) << 32 | uint64_t(i));
+  std::sort(keys.begin(), keys.end());
+  std::vector<int32_t> order(keys.size());
+  for (size_t k = 0; k < keys.size(); ++k) order[k] = static_cast<int32_t>(keys[k] & 0xffffffffu);
   std::partial_sum(out.gaussian_offsets.begin(), out.gaussian_offsets.end(), out.gaussian_offsets.begin());
-  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
-    return out.depths[a] < out.depths[b] || (out.depths[a] == out.depths[b] && a < b);
-  });
-
   const int64_t entries = out.gaussian_offsets[n];
   if (entries > INT32_MAX) throw std::runtime_error("too many tile–Gaussian intersections");
+
+  // Tile counts, then CSR offsets.
   out.tile_offsets.assign(grid.count() + 1, 0);
-  for (int32_t i : order) {
-    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
-                                 out.radii[2 * i + 1]);
+  for (int64_t i = 0; i < n; ++i) {
+    if (!out.visible[i]) continue;
+    const TileRect r = rect_of(i);
     for (int ty = r.y0; ty < r.y1; ++ty)
       for (int tx = r.x0; tx < r.x1; ++tx) ++out.tile_offsets[ty * grid.tiles_x + tx + 1];
   }
   std::partial_sum(out.tile_offsets.begin(), out.tile_offsets.end(), out.tile_offsets.begin());
   out.tile_entries.resize(entries);
   out.entry_of_gaussian.resize(entries);
-  std::vector<int32_t> cursor(out.tile_offsets.begin(), out.tile_offsets.end() - 1);
-  for (int32_t i : order) {
-    const TileRect r = tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i],
-                                 out.radii[2 * i + 1]);
-    int32_t local = out.gaussian_offsets[i];
-    for (int ty = r.y0; ty < r.y1; ++ty)
-      for (int tx = r.x0; tx < r.x1; ++tx) {
-        const int32_t pos = cursor[ty * grid.tiles_x + tx]++;
-        out.tile_entries[pos] = i;
-        out.entry_of_gaussian[local++] = pos;
-      }
+
+  // Bands of tile rows with about equal numbers of entries.
+  const int bands = std::min(threads, grid.tiles_y);
+  std::vector<int> band_start(bands + 1, grid.tiles_y);
+  band_start[0] = 0;
+  for (int b = 1, ty = 0; b < bands; ++b) {
+    while (ty < grid.tiles_y && out.tile_offsets[ty * grid.tiles_x] < entries * b / bands) ++ty;
+    band_start[b] = ty;
+  }
+#pragma omp parallel for num_threads(threads) schedule(static, 1)
+  for (int b = 0; b < bands; ++b) {
+    const int y_lo = band_start[b], y_hi = band_start[b + 1];
+    if (y_lo >= y_hi) continue;
+    std::vector<int32_t> cursor(out.tile_offsets.begin() + y_lo * grid.tiles_x,
+                                out.tile_offsets.begin() + y_hi * grid.tiles_x);
+    for (int32_t i : order) {
+      const TileRect r = rect_of(i);
+      const int ty0 = std::max(r.y0, y_lo), ty1 = std::min(r.y1, y_hi);
+      for (int ty = ty0; ty < ty1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) {
+          const int32_t pos = cursor[(ty - y_lo) * grid.tiles_x + tx]++;
+          out.tile_entries[pos] = i;
+          // Entries of a Gaussian are numbered in row-major order over its rectangle.
+          out.entry_of_gaussian[out.gaussian_offsets[i] + (ty - r.y0) * (r.x1 - r.x0) + (tx - r.x0)] = pos;
+        }
+    }
   }
 }
 
@@ -220,7 +244,7 @@ void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSet
 
   preprocess(g, cam, s, sh_degree, out);
   const TileGrid grid(cam.width, cam.height);
-  bin_gaussians(grid, out);
+  bin_gaussians(grid, thread_count(s), out);
 
   int64_t evaluated = 0;
 #pragma omp parallel for num_threads(thread_count(s)) schedule(dynamic, 1) reduction(+ : evaluated)
