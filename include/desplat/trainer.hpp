@@ -1,0 +1,120 @@
+// Static 3DGS training on the CPU (the Splatfacto baseline, REFERENCE.md §4–7).
+//
+// All geometry is in the normalized world frame (§1). Training images are float RGB
+// [H, W, 3] at the full training resolution; the resolution schedule derives the
+// lower-resolution copies (block averages) once per view and keeps them.
+// Not thread-safe: one Trainer per thread; it uses OpenMP internally.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "desplat/camera.hpp"
+#include "desplat/density.hpp"
+#include "desplat/image_io.hpp"
+#include "desplat/raster.hpp"
+#include "desplat/trainable.hpp"
+#include "desplat/world_frame.hpp"
+
+namespace desplat {
+
+struct TrainView {
+  std::string name;
+  Camera camera;      // undistorted pinhole, normalized frame, full training resolution
+  FloatImage image;   // [H, W, 3] matching the camera
+};
+
+struct TrainingData {
+  std::vector<TrainView> train, test;
+  std::vector<std::array<float, 3>> points;     // normalized frame
+  std::vector<std::array<uint8_t, 3>> colors;
+  WorldNormalization normalization;
+};
+
+struct TrainConfig {
+  int64_t iterations = 30000;
+  int sh_degree = 3;
+  int sh_degree_interval = 1000;  // active SH degree +1 every this many steps
+  int num_downscales = 2;         // train at 2^num_downscales lower resolution first …
+  int resolution_schedule = 3000; // … halving the factor every this many steps
+  float ssim_lambda = 0.2f;
+  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this at `iterations`
+  LearningRates lr;
+  DensifySettings densify;
+  bool random_background = true;
+  std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
+  int random_init_points = 50000;  // used when the scene has no points
+  float random_init_extent = 1.0f; // half-width of the cube for random initialization
+  uint64_t seed = 0;
+  int threads = 0;                 // 0: all cores
+};
+
+struct StepTimings {
+  double forward = 0, backward = 0, loss = 0, optimizer = 0;  // seconds
+};
+
+struct StepStats {
+  int64_t step = 0;
+  double loss = 0, psnr = 0;
+  size_t gaussians = 0;
+  RefineReport refine;
+  int64_t nonfinite_pruned = 0;
+  StepTimings timings;
+};
+
+struct ViewMetrics {
+  std::string name;
+  double psnr = 0, ssim = 0;
+};
+
+class Trainer {
+ public:
+  // `data` must outlive the trainer.
+  Trainer(const TrainingData& data, TrainConfig config);
+
+  StepStats step();
+  int64_t current_step() const { return step_; }
+  const TrainConfig& config() const { return config_; }
+  const TrainableGaussians& gaussians() const { return gaussians_; }
+  TrainableGaussians& mutable_gaussians() { return gaussians_; }  // tests and checkpoints
+  std::mt19937_64& rng() { return rng_; }
+
+  // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped).
+  FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;
+  // PSNR/SSIM of every view's render over the evaluation background.
+  std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
+
+  // Where non-finite values are reported (once per incident); default: stderr.
+  std::function<void(const std::string&)> warn;
+
+  // Exposed for checkpointing: the epoch permutation and the position in it.
+  std::vector<int32_t> view_order;
+  int64_t view_order_pos = 0;
+  void set_step(int64_t s) { step_ = s; }
+
+ private:
+  const TrainingData& data_;
+  TrainConfig config_;
+  TrainableGaussians gaussians_;
+  std::mt19937_64 rng_;
+  int64_t step_ = 0;
+  // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
+  std::vector<std::vector<FloatImage>> downscaled_;
+  // Scratch reused every step.
+  RasterOutput forward_;
+  RasterGradients grads_;
+  std::vector<float> composite_, d_color_, d_alpha_;
+
+  int next_view();
+  const FloatImage& target_at(int view, int factor);
+  int64_t prune_nonfinite();
+};
+
+// Camera and image at 1/factor resolution (block average, sizes rounded down).
+Camera downscale_camera(const Camera& c, int factor);
+FloatImage downscale_image(const FloatImage& img, int factor);
+
+}  // namespace desplat

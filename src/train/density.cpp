@@ -1,0 +1,130 @@
+// Split / duplicate / cull / opacity reset (REFERENCE.md §7).
+#include "desplat/density.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+namespace desplat {
+namespace {
+
+float max_scale(const GaussianSet& g, size_t i) {
+  return std::exp(std::max({g.log_scales[3 * i], g.log_scales[3 * i + 1], g.log_scales[3 * i + 2]}));
+}
+float logit(float p) { return std::log(p / (1 - p)); }
+
+template <typename T> void append_row(std::vector<T>& dst, const std::vector<T>& src, size_t i, int stride) {
+  dst.insert(dst.end(), src.begin() + i * stride, src.begin() + (i + 1) * stride);
+}
+
+}  // namespace
+
+GaussianSet copy_rows(const GaussianSet& g, const std::vector<uint8_t>& mask) {
+  GaussianSet out;
+  out.color_mode = g.color_mode;
+  out.sh_degree = g.sh_degree;
+  const int cs = g.view().color_floats_per_gaussian();
+  for (size_t i = 0; i < g.size(); ++i) {
+    if (!mask[i]) continue;
+    append_row(out.means, g.means, i, 3);
+    append_row(out.log_scales, g.log_scales, i, 3);
+    append_row(out.quats, g.quats, i, 4);
+    append_row(out.opacity_logits, g.opacity_logits, i, 1);
+    append_row(out.colors, g.colors, i, cs);
+  }
+  return out;
+}
+
+// Each selected Gaussian becomes `samples` Gaussians placed at draws from itself,
+// with scales divided by `scale_factor`; the draws are ordered sample-major (all
+// selected Gaussians for sample 0, then sample 1), as Splatfacto's repeat() does.
+GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask, int samples, float scale_factor,
+                          std::mt19937_64& rng) {
+  const GaussianSet base = copy_rows(g, mask);
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  GaussianSet out;
+  out.color_mode = g.color_mode;
+  out.sh_degree = g.sh_degree;
+  const float log_factor = std::log(scale_factor);
+  for (int s = 0; s < samples; ++s) {
+    GaussianSet copy = base;
+    for (size_t i = 0; i < copy.size(); ++i) {
+      Eigen::Quaternionf q(copy.quats[4 * i], copy.quats[4 * i + 1], copy.quats[4 * i + 2], copy.quats[4 * i + 3]);
+      if (q.squaredNorm() > 0) q.normalize();
+      const Eigen::Vector3f scale(std::exp(copy.log_scales[3 * i]), std::exp(copy.log_scales[3 * i + 1]),
+                                  std::exp(copy.log_scales[3 * i + 2]));
+      Eigen::Vector3f z;
+      for (int k = 0; k < 3; ++k) z[k] = normal(rng);
+      const Eigen::Vector3f offset = q.toRotationMatrix() * scale.cwiseProduct(z);
+      for (int k = 0; k < 3; ++k) {
+        copy.means[3 * i + k] += offset[k];
+        copy.log_scales[3 * i + k] -= log_factor;
+      }
+    }
+    for (auto [dst, src] : {std::pair{&out.means, &copy.means}, std::pair{&out.log_scales, &copy.log_scales},
+                            std::pair{&out.quats, &copy.quats}, std::pair{&out.opacity_logits, &copy.opacity_logits},
+                            std::pair{&out.colors, &copy.colors}})
+      dst->insert(dst->end(), src->begin(), src->end());
+  }
+  return out;
+}
+
+RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
+                              int num_train_views, std::mt19937_64& rng) {
+  RefineReport report;
+  if (!s.enabled || step <= s.warmup || step % s.refine_every != 0) return report;
+  report.ran = true;
+  const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
+  const bool densify = step < s.stop_split_at && step % reset_interval > num_train_views + s.refine_every;
+  const size_t n = g.size();
+  std::vector<uint8_t> remove(n, 0);
+
+  if (densify) {
+    std::vector<uint8_t> split(n, 0), dup(n, 0);
+    for (size_t i = 0; i < n; ++i) {
+      if (g.visible_count[i] == 0) continue;
+      const float mean_grad = g.absgrad_sum[i] / float(g.visible_count[i]) * 0.5f * float(image_size);
+      if (!(mean_grad > s.grad_threshold)) continue;
+      const float size = max_scale(g.params, i);
+      const bool big_on_screen = step < s.stop_screen_size_at && g.max_screen_radius[i] > s.split_screen_size;
+      split[i] = size > s.size_threshold || big_on_screen;
+      dup[i] = size <= s.size_threshold;
+    }
+    const GaussianSet split_set = split_samples(g.params, split, s.split_samples, s.split_scale_factor, rng);
+    const GaussianSet dup_set = copy_rows(g.params, dup);
+    report.split = std::count(split.begin(), split.end(), 1);
+    report.duplicated = std::count(dup.begin(), dup.end(), 1);
+    g.append(split_set);
+    g.append(dup_set);
+    remove = split;  // the originals of split Gaussians go away
+    remove.resize(g.size(), 0);
+  }
+  // Cull (also after densification has stopped).
+  const float min_logit = logit(s.cull_alpha);
+  for (size_t i = 0; i < g.size(); ++i) {
+    bool cull = g.params.opacity_logits[i] < min_logit;
+    if (step > reset_interval) {
+      cull = cull || max_scale(g.params, i) > s.cull_scale;
+      if (step < s.stop_screen_size_at) cull = cull || g.max_screen_radius[i] > s.cull_screen_size;
+    }
+    if (cull && !remove[i]) ++report.culled;
+    remove[i] = remove[i] || cull;
+  }
+  std::vector<uint8_t> keep(g.size());
+  for (size_t i = 0; i < keep.size(); ++i) keep[i] = !remove[i];
+  g.keep(keep);
+
+  if (step < s.stop_split_at && step % reset_interval == s.refine_every) {
+    const float cap = logit(2.0f * s.cull_alpha);
+    const int opacity = int(ParamGroup::OpacityLogits);
+    for (size_t i = 0; i < g.size(); ++i) {
+      g.params.opacity_logits[i] = std::min(g.params.opacity_logits[i], cap);
+      g.adam_m[opacity][i] = g.adam_v[opacity][i] = 0.0f;
+    }
+    report.opacity_reset = true;
+  }
+  g.reset_statistics();
+  return report;
+}
+
+}  // namespace desplat

@@ -1,0 +1,104 @@
+// One table of (name, field) pairs drives both directions, so a new setting is added
+// in exactly one place.
+#include "desplat/train_config_json.hpp"
+
+#include <stdexcept>
+#include <string>
+#include <variant>
+
+namespace desplat {
+namespace {
+
+using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*>;
+struct Entry {
+  const char* name;
+  Field field;
+};
+
+std::vector<Entry> fields(TrainConfig& c) {
+  return {
+      {"iterations", &c.iterations},
+      {"sh_degree", &c.sh_degree},
+      {"sh_degree_interval", &c.sh_degree_interval},
+      {"num_downscales", &c.num_downscales},
+      {"resolution_schedule", &c.resolution_schedule},
+      {"ssim_lambda", &c.ssim_lambda},
+      {"means_lr_final", &c.means_lr_final},
+      {"lr.means", &c.lr.means},
+      {"lr.log_scales", &c.lr.log_scales},
+      {"lr.quats", &c.lr.quats},
+      {"lr.opacity_logits", &c.lr.opacity_logits},
+      {"lr.sh_dc", &c.lr.colors_dc},
+      {"lr.sh_rest", &c.lr.colors_rest},
+      {"densify.enabled", &c.densify.enabled},
+      {"densify.warmup", &c.densify.warmup},
+      {"densify.refine_every", &c.densify.refine_every},
+      {"densify.reset_alpha_every", &c.densify.reset_alpha_every},
+      {"densify.stop_split_at", &c.densify.stop_split_at},
+      {"densify.stop_screen_size_at", &c.densify.stop_screen_size_at},
+      {"densify.grad_threshold", &c.densify.grad_threshold},
+      {"densify.size_threshold", &c.densify.size_threshold},
+      {"densify.split_screen_size", &c.densify.split_screen_size},
+      {"densify.split_samples", &c.densify.split_samples},
+      {"densify.split_scale_factor", &c.densify.split_scale_factor},
+      {"densify.cull_alpha", &c.densify.cull_alpha},
+      {"densify.cull_scale", &c.densify.cull_scale},
+      {"densify.cull_screen_size", &c.densify.cull_screen_size},
+      {"random_background", &c.random_background},
+      {"eval_background", &c.eval_background},
+      {"random_init_points", &c.random_init_points},
+      {"random_init_extent", &c.random_init_extent},
+      {"seed", &c.seed},
+      {"threads", &c.threads},
+  };
+}
+
+nlohmann::json::json_pointer pointer(const std::string& dotted) {
+  std::string p = "/" + dotted;
+  for (char& ch : p)
+    if (ch == '.') ch = '/';
+  return nlohmann::json::json_pointer(p);
+}
+
+void collect_leaves(const nlohmann::json& j, const std::string& prefix, std::vector<std::string>& out) {
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    const std::string key = prefix.empty() ? it.key() : prefix + "." + it.key();
+    if (it->is_object()) collect_leaves(*it, key, out);
+    else out.push_back(key);
+  }
+}
+
+}  // namespace
+
+nlohmann::json config_to_json(const TrainConfig& c) {
+  TrainConfig copy = c;
+  nlohmann::json j = nlohmann::json::object();
+  for (const Entry& e : fields(copy)) std::visit([&](auto* p) { j[pointer(e.name)] = *p; }, e.field);
+  return j;
+}
+
+TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
+  if (!j.is_object()) throw std::invalid_argument("config: the top level must be a JSON object");
+  std::vector<std::string> leaves;
+  collect_leaves(j, "", leaves);
+  auto table = fields(base);
+  for (const std::string& key : leaves) {
+    bool known = false;
+    for (const Entry& e : table) known = known || key == e.name;
+    if (!known) throw std::invalid_argument("config: unknown setting '" + key + "'");
+  }
+  for (const Entry& e : table) {
+    const auto ptr = pointer(e.name);
+    if (!j.contains(ptr)) continue;
+    try {
+      std::visit([&](auto* p) { *p = j.at(ptr).get<std::remove_pointer_t<decltype(p)>>(); }, e.field);
+    } catch (const nlohmann::json::exception& ex) {
+      throw std::invalid_argument(std::string("config: setting '") + e.name + "' has the wrong type (" + ex.what() + ")");
+    }
+  }
+  if (base.iterations < 1) throw std::invalid_argument("config: iterations must be at least 1");
+  if (base.sh_degree < 0 || base.sh_degree > 3) throw std::invalid_argument("config: sh_degree must be 0..3");
+  return base;
+}
+
+}  // namespace desplat

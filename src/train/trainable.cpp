@@ -1,0 +1,141 @@
+// Row-aligned parameter/moment/statistics storage and the Adam update.
+#include "desplat/trainable.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace desplat {
+
+TrainableGaussians::TrainableGaussians(GaussianSet initial) : params(std::move(initial)) {
+  for (int g = 0; g < kParamGroups; ++g) {
+    adam_m[g].assign(param(ParamGroup(g)).size(), 0.0f);
+    adam_v[g].assign(param(ParamGroup(g)).size(), 0.0f);
+  }
+  reset_statistics();
+}
+
+std::vector<float>& TrainableGaussians::param(ParamGroup g) {
+  switch (g) {
+    case ParamGroup::Means: return params.means;
+    case ParamGroup::LogScales: return params.log_scales;
+    case ParamGroup::Quats: return params.quats;
+    case ParamGroup::OpacityLogits: return params.opacity_logits;
+    case ParamGroup::Colors: break;
+  }
+  return params.colors;
+}
+
+int TrainableGaussians::floats_per_gaussian(ParamGroup g) const {
+  switch (g) {
+    case ParamGroup::Means:
+    case ParamGroup::LogScales: return 3;
+    case ParamGroup::Quats: return 4;
+    case ParamGroup::OpacityLogits: return 1;
+    case ParamGroup::Colors: break;
+  }
+  return params.view().color_floats_per_gaussian();
+}
+
+namespace {
+template <typename T> void keep_rows(std::vector<T>& v, int stride, const std::vector<uint8_t>& keep) {
+  size_t out = 0;
+  for (size_t i = 0; i < keep.size(); ++i) {
+    if (!keep[i]) continue;
+    if (out != i) std::copy_n(v.begin() + i * stride, stride, v.begin() + out * stride);
+    ++out;
+  }
+  v.resize(out * stride);
+}
+}  // namespace
+
+void TrainableGaussians::keep(const std::vector<uint8_t>& keep_mask) {
+  if (keep_mask.size() != size()) throw std::logic_error("keep mask has the wrong length");
+  for (int g = 0; g < kParamGroups; ++g) {
+    const int stride = floats_per_gaussian(ParamGroup(g));
+    keep_rows(param(ParamGroup(g)), stride, keep_mask);
+    keep_rows(adam_m[g], stride, keep_mask);
+    keep_rows(adam_v[g], stride, keep_mask);
+  }
+  keep_rows(absgrad_sum, 1, keep_mask);
+  keep_rows(visible_count, 1, keep_mask);
+  keep_rows(max_screen_radius, 1, keep_mask);
+}
+
+void TrainableGaussians::append(const GaussianSet& extra) {
+  if (extra.color_mode != params.color_mode || extra.sh_degree != params.sh_degree)
+    throw std::logic_error("append: color layout differs");
+  for (int g = 0; g < kParamGroups; ++g) {
+    const GaussianSet& e = extra;
+    const std::vector<float>* src[] = {&e.means, &e.log_scales, &e.quats, &e.opacity_logits, &e.colors};
+    std::vector<float>& dst = param(ParamGroup(g));
+    dst.insert(dst.end(), src[g]->begin(), src[g]->end());
+    adam_m[g].resize(dst.size(), 0.0f);
+    adam_v[g].resize(dst.size(), 0.0f);
+  }
+  absgrad_sum.resize(size(), 0.0f);
+  visible_count.resize(size(), 0);
+  max_screen_radius.resize(size(), 0.0f);
+}
+
+void TrainableGaussians::reset_statistics() {
+  absgrad_sum.assign(size(), 0.0f);
+  visible_count.assign(size(), 0);
+  max_screen_radius.assign(size(), 0.0f);
+}
+
+void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const RasterGradients& grads) {
+  const float inv_size = 1.0f / float(std::max(fw.width, fw.height));
+  for (size_t i = 0; i < size(); ++i) {
+    if (!fw.visible[i]) continue;
+    absgrad_sum[i] += grads.absgrad[i];
+    visible_count[i] += 1;
+    const float r = float(std::max(fw.radii[2 * i], fw.radii[2 * i + 1])) * inv_size;
+    max_screen_radius[i] = std::max(max_screen_radius[i], r);
+  }
+}
+
+void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a) {
+  ++adam_step;
+  const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
+  const double bc2 = 1.0 - std::pow(double(a.beta2), double(adam_step));
+  const float sqrt_bc2 = float(std::sqrt(bc2));
+  const std::vector<float>* g_of[] = {&grads.means, &grads.log_scales, &grads.quats, &grads.opacity_logits,
+                                      &grads.colors};
+  for (int g = 0; g < kParamGroups; ++g) {
+    std::vector<float>& p = param(ParamGroup(g));
+    const std::vector<float>& grad = *g_of[g];
+    if (grad.size() != p.size()) throw std::logic_error("adam_update: gradient size differs from parameters");
+    const int stride = floats_per_gaussian(ParamGroup(g));
+    const float base[] = {lr.means, lr.log_scales, lr.quats, lr.opacity_logits, lr.colors_dc};
+    const bool sh_rest = ParamGroup(g) == ParamGroup::Colors && params.color_mode == ColorMode::SphericalHarmonics;
+    float* m = adam_m[g].data();
+    float* v = adam_v[g].data();
+    const int64_t n = static_cast<int64_t>(p.size());
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; ++i) {
+      // In SH colors, the first 3 floats of each row are the DC coefficient.
+      const float rate = sh_rest && (i % stride) >= 3 ? lr.colors_rest : base[g];
+      const float step_size = float(rate / bc1);
+      m[i] = a.beta1 * m[i] + (1 - a.beta1) * grad[i];
+      v[i] = a.beta2 * v[i] + (1 - a.beta2) * grad[i] * grad[i];
+      p[i] -= step_size * m[i] / (std::sqrt(v[i]) / sqrt_bc2 + a.eps);
+    }
+  }
+}
+
+void TrainableGaussians::check_consistent() const {
+  const size_t n = size();
+  auto& self = const_cast<TrainableGaussians&>(*this);
+  for (int g = 0; g < kParamGroups; ++g) {
+    const size_t want = n * floats_per_gaussian(ParamGroup(g));
+    if (self.param(ParamGroup(g)).size() != want || adam_m[g].size() != want || adam_v[g].size() != want)
+      throw std::logic_error("parameter group " + std::to_string(g) + " is out of step with " + std::to_string(n) +
+                             " Gaussians");
+  }
+  if (absgrad_sum.size() != n || visible_count.size() != n || max_screen_radius.size() != n)
+    throw std::logic_error("densification statistics are out of step with the Gaussians");
+}
+
+}  // namespace desplat

@@ -1,0 +1,205 @@
+// The training loop: one view per step, static render over a random background,
+// photometric loss, backward, Adam, density control (REFERENCE.md §4–7).
+#include "desplat/trainer.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <numeric>
+#include <stdexcept>
+
+#include "desplat/init.hpp"
+#include "desplat/loss.hpp"
+
+namespace desplat {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, std::mt19937_64& rng) {
+  if (!data.points.empty()) return init_gaussians_from_points(data.points, data.colors, cfg.sh_degree, rng());
+  // No points (REFERENCE.md §5): uniform in a cube, random colors.
+  std::uniform_real_distribution<float> u(-cfg.random_init_extent, cfg.random_init_extent);
+  std::uniform_int_distribution<int> byte(0, 255);
+  std::vector<std::array<float, 3>> xyz(cfg.random_init_points);
+  std::vector<std::array<uint8_t, 3>> rgb(cfg.random_init_points);
+  for (size_t i = 0; i < xyz.size(); ++i) {
+    xyz[i] = {u(rng), u(rng), u(rng)};
+    rgb[i] = {uint8_t(byte(rng)), uint8_t(byte(rng)), uint8_t(byte(rng))};
+  }
+  return init_gaussians_from_points(xyz, rgb, cfg.sh_degree, rng());
+}
+
+}  // namespace
+
+Camera downscale_camera(const Camera& c, int factor) {
+  Camera out = c;
+  out.fx /= factor, out.fy /= factor, out.cx /= factor, out.cy /= factor;
+  out.width = std::max(1, c.width / factor);
+  out.height = std::max(1, c.height / factor);
+  return out;
+}
+
+FloatImage downscale_image(const FloatImage& img, int factor) {
+  FloatImage out{std::max(1, img.width / factor), std::max(1, img.height / factor), 3, {}};
+  out.pixels.assign(size_t(out.width) * out.height * 3, 0.0f);
+  const float inv = 1.0f / float(factor * factor);
+  for (int y = 0; y < out.height; ++y)
+    for (int x = 0; x < out.width; ++x)
+      for (int c = 0; c < 3; ++c) {
+        float s = 0;
+        for (int dy = 0; dy < factor; ++dy)
+          for (int dx = 0; dx < factor; ++dx)
+            s += img.pixels[(size_t(y * factor + dy) * img.width + (x * factor + dx)) * 3 + c];
+        out.pixels[(size_t(y) * out.width + x) * 3 + c] = s * inv;
+      }
+  return out;
+}
+
+Trainer::Trainer(const TrainingData& data, TrainConfig config)
+    : data_(data), config_(std::move(config)), rng_(config_.seed) {
+  if (data_.train.empty()) throw std::invalid_argument("training needs at least one training view");
+  for (const TrainView& v : data_.train) {
+    v.camera.validate();
+    if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
+      throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
+  }
+  gaussians_ = TrainableGaussians(initial_gaussians(data_, config_, rng_));
+  downscaled_.resize(data_.train.size());
+  warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
+}
+
+int Trainer::next_view() {
+  if (view_order_pos >= static_cast<int64_t>(view_order.size())) {
+    view_order.resize(data_.train.size());
+    std::iota(view_order.begin(), view_order.end(), 0);
+    std::shuffle(view_order.begin(), view_order.end(), rng_);
+    view_order_pos = 0;
+  }
+  return view_order[view_order_pos++];
+}
+
+const FloatImage& Trainer::target_at(int view, int factor) {
+  if (factor == 1) return data_.train[view].image;
+  int level = 0;
+  while ((2 << level) < factor) ++level;
+  auto& cache = downscaled_[view];
+  while (static_cast<int>(cache.size()) <= level)
+    cache.push_back(downscale_image(data_.train[view].image, 2 << cache.size()));
+  return cache[level];
+}
+
+StepStats Trainer::step() {
+  StepStats stats;
+  stats.step = step_;
+  const int view = next_view();
+  const int factor = 1 << std::max<int64_t>(config_.num_downscales - step_ / config_.resolution_schedule, 0);
+  const Camera cam = downscale_camera(data_.train[view].camera, factor);
+  const FloatImage& target = target_at(view, factor);
+  const size_t pixels = size_t(cam.width) * cam.height;
+
+  RasterSettings rs;
+  rs.num_threads = config_.threads;
+  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
+  std::array<float, 3> bg = config_.eval_background;
+  if (config_.random_background) {
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    bg = {u(rng_), u(rng_), u(rng_)};
+  }
+
+  auto t0 = Clock::now();
+  rasterize_forward(gaussians_.params.view(), cam, rs, forward_);
+  composite_.resize(3 * pixels);
+  for (size_t p = 0; p < pixels; ++p)
+    for (int c = 0; c < 3; ++c)
+      composite_[3 * p + c] = std::clamp(forward_.color[3 * p + c] + (1.0f - forward_.alpha[p]) * bg[c], 0.0f, 1.0f);
+  stats.timings.forward = seconds_since(t0);
+
+  t0 = Clock::now();
+  d_color_.resize(3 * pixels);
+  const PhotometricLoss loss =
+      photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_color_);
+  // Through the clamp and C = C_s + (1 − A)·bg: ∂/∂C_s = ∂/∂C, ∂/∂A = −Σ_c ∂/∂C_c · bg_c.
+  d_alpha_.assign(pixels, 0.0f);
+  for (size_t p = 0; p < pixels; ++p)
+    for (int c = 0; c < 3; ++c) {
+      const float raw = forward_.color[3 * p + c] + (1.0f - forward_.alpha[p]) * bg[c];
+      if (raw < 0.0f || raw > 1.0f) d_color_[3 * p + c] = 0.0f;
+      d_alpha_[p] -= d_color_[3 * p + c] * bg[c];
+    }
+  stats.loss = loss.loss;
+  stats.psnr = psnr(composite_, target.pixels);
+  stats.timings.loss = seconds_since(t0);
+
+  t0 = Clock::now();
+  rasterize_backward(gaussians_.params.view(), cam, rs, forward_, d_color_, d_alpha_, {}, grads_);
+  stats.timings.backward = seconds_since(t0);
+
+  t0 = Clock::now();
+  if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(forward_, grads_);
+  LearningRates lr = config_.lr;
+  // Exponential decay of the means' rate from lr.means to means_lr_final.
+  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.iterations)));
+  lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
+  gaussians_.adam_update(grads_, lr, AdamSettings{});
+  stats.nonfinite_pruned = prune_nonfinite();
+  stats.refine = refine_gaussians(gaussians_, config_.densify, step_, std::max(cam.width, cam.height),
+                                  static_cast<int>(data_.train.size()), rng_);
+  stats.timings.optimizer = seconds_since(t0);
+  stats.gaussians = gaussians_.size();
+  ++step_;
+  return stats;
+}
+
+// A Gaussian whose parameter or Adam moment is not finite is removed before it can
+// spread NaN through the blending of its neighbours.
+int64_t Trainer::prune_nonfinite() {
+  const size_t n = gaussians_.size();
+  std::vector<uint8_t> keep(n, 1);
+  int64_t bad = 0;
+  for (int g = 0; g < kParamGroups; ++g) {
+    const ParamGroup group = ParamGroup(g);
+    const int stride = gaussians_.floats_per_gaussian(group);
+    const std::vector<float>& p = gaussians_.param(group);
+    for (size_t i = 0; i < n; ++i)
+      for (int k = 0; k < stride; ++k) {
+        const size_t j = i * stride + k;
+        if (std::isfinite(p[j]) && std::isfinite(gaussians_.adam_m[g][j]) && std::isfinite(gaussians_.adam_v[g][j]))
+          continue;
+        if (keep[i]) {
+          ++bad;
+          warn("step " + std::to_string(step_) + ": Gaussian " + std::to_string(i) +
+               " has a non-finite parameter or optimizer moment (group " + std::to_string(g) + "); pruned");
+        }
+        keep[i] = 0;
+      }
+  }
+  if (bad > 0) gaussians_.keep(keep);
+  return bad;
+}
+
+FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background) const {
+  RasterSettings rs;
+  rs.num_threads = config_.threads;
+  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
+  RasterOutput out;
+  rasterize_forward(gaussians_.params.view(), camera, rs, out);
+  FloatImage img{camera.width, camera.height, 3, std::vector<float>(out.color.size())};
+  for (size_t p = 0; p < out.alpha.size(); ++p)
+    for (int c = 0; c < 3; ++c)
+      img.pixels[3 * p + c] = std::clamp(out.color[3 * p + c] + (1.0f - out.alpha[p]) * background[c], 0.0f, 1.0f);
+  return img;
+}
+
+std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
+  std::vector<ViewMetrics> out;
+  for (const TrainView& v : views) {
+    const FloatImage img = render(v.camera, config_.eval_background);
+    out.push_back({v.name, psnr(img.pixels, v.image.pixels), ssim(img.pixels, v.image.pixels, img.width, img.height)});
+  }
+  return out;
+}
+
+}  // namespace desplat

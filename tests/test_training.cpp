@@ -1,0 +1,78 @@
+// Short training runs on a scene with known ground truth.
+#include <gtest/gtest.h>
+
+#include "support/synthetic_views.hpp"
+
+namespace desplat::test {
+namespace {
+
+TrainConfig short_config(int64_t iterations) {
+  TrainConfig c;
+  c.iterations = iterations;
+  c.sh_degree = 1;
+  c.sh_degree_interval = 100;
+  c.resolution_schedule = 100;  // factor 4, 2, then 1 after step 200
+  c.densify.warmup = 100;
+  c.densify.refine_every = 50;
+  c.densify.reset_alpha_every = 1000;  // no opacity reset in a short run
+  c.threads = 2;
+  // The synthetic views show the evaluation background where nothing is; a random
+  // training background would make that flat color content to be painted with opaque
+  // Gaussians (real captures have no empty background, so training keeps it on).
+  c.random_background = false;
+  return c;
+}
+
+TEST(Training, LossFallsAndHeldOutPsnrClearsFloor) {
+  const TrainingData data = synthetic_training_data(24, 64, 48, 3);
+  Trainer trainer(data, short_config(400));
+  const double psnr_before = [&] {
+    double s = 0;
+    for (const auto& m : trainer.evaluate(data.test)) s += m.psnr;
+    return s / data.test.size();
+  }();
+  double early = 0, late = 0;
+  int64_t splits = 0, dups = 0;
+  for (int i = 0; i < 400; ++i) {
+    const StepStats st = trainer.step();
+    if (i >= 200 && i < 240) early += st.loss;  // both windows at full resolution
+    if (i >= 360) late += st.loss;
+    splits += st.refine.split, dups += st.refine.duplicated;
+    trainer.mutable_gaussians().check_consistent();
+  }
+  EXPECT_LT(late, 0.8 * early);
+  double psnr_after = 0;
+  for (const auto& m : trainer.evaluate(data.test)) psnr_after += m.psnr;
+  psnr_after /= data.test.size();
+  // Measured on this scene (2 threads): the initialization scores 20.7 dB (flat
+  // background matches, blobs faint); a working trainer reaches 24.8 dB at step 400
+  // and keeps rising (28.2 dB at 500, 34.6 dB at 1500, so nothing stalls). The floor
+  // of 23 dB is 2.3 dB above "not learning" and 1.8 dB below the measured value.
+  EXPECT_GT(psnr_after, 23.0) << "before " << psnr_before;
+  EXPECT_GT(psnr_after, psnr_before + 2.0);
+  EXPECT_GT(splits + dups, 0);  // density control ran
+}
+
+TEST(Training, NonFiniteGaussianIsPrunedAndTrainingContinues) {
+  const TrainingData data = synthetic_training_data(8, 64, 48, 5);
+  Trainer trainer(data, short_config(50));
+  std::vector<std::string> warnings;
+  trainer.warn = [&](const std::string& m) { warnings.push_back(m); };
+  for (int i = 0; i < 5; ++i) trainer.step();
+  const size_t before = trainer.gaussians().size();
+  trainer.mutable_gaussians().params.log_scales[3 * 7 + 1] = NAN;     // a parameter
+  trainer.mutable_gaussians().adam_v[0][3 * 11] = INFINITY;            // a moment
+  trainer.step();
+  ASSERT_EQ(warnings.size(), 2u);
+  const std::string all = warnings[0] + warnings[1];
+  EXPECT_NE(all.find("Gaussian 7 "), std::string::npos) << all;
+  EXPECT_NE(all.find("Gaussian 11 "), std::string::npos) << all;
+  EXPECT_NE(warnings[0].find("step 5"), std::string::npos);
+  EXPECT_EQ(trainer.gaussians().size(), before - 2);
+  for (int i = 0; i < 20; ++i) trainer.step();
+  for (int g = 0; g < kParamGroups; ++g)
+    for (float v : trainer.mutable_gaussians().param(ParamGroup(g))) ASSERT_TRUE(std::isfinite(v));
+}
+
+}  // namespace
+}  // namespace desplat::test
