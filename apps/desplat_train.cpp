@@ -1,0 +1,65 @@
+// desplat_train: trains a Gaussian splatting model from a COLMAP capture (or a folder
+// of photos, via COLMAP) on the CPU. Options only; the job is desplat::run_training.
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+
+#include "desplat/training_run.hpp"
+
+namespace {
+std::atomic<bool> g_stop{false};
+void on_signal(int) { g_stop.store(true); }
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "Train a 3D Gaussian Splatting model on the CPU.\n"
+      "Input: --data DIR with images/ and sparse/0/ (a COLMAP model), or --images DIR with photos only\n"
+      "(COLMAP then reconstructs the cameras). Outputs go to --out (see README: config.json,\n"
+      "checkpoint.ckpt, metrics.json, renders/test/, point_cloud.ply). Ctrl-C writes a checkpoint\n"
+      "and exits; --resume continues from it."};
+  desplat::TrainingRunOptions o;
+  auto* data = app.add_option("--data", o.data_dir, "scene folder with images/ and sparse/0/");
+  auto* images = app.add_option("--images", o.images_dir, "folder of photos without a model: run COLMAP SfM first");
+  data->excludes(images);
+  app.add_option("--out", o.out_dir, "output folder")->required();
+  app.add_option("--config", o.config_file, "JSON file overriding training settings (see config.json of any run)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--iterations", o.iterations, "training steps (default 30000)")->check(CLI::PositiveNumber);
+  app.add_option("--seed", o.seed, "random seed (default 0)");
+  app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(CLI::NonNegativeNumber);
+  app.add_flag("--static-only", o.static_only,
+               "static Gaussians only (the Splatfacto baseline; currently the only mode)");
+  app.add_flag("--resume", o.resume, "continue from --out/checkpoint.ckpt");
+  app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
+      ->check(CLI::PositiveNumber)->capture_default_str();
+  std::string split_rule = "every-nth";
+  app.add_option("--split", split_rule, "train/test split: every-nth, all-train, lists, robustnerf, onthego, phototourism")
+      ->capture_default_str();
+  app.add_option("--test-every", o.split.every_nth, "every-nth split: hold out every Nth image")->capture_default_str();
+  app.add_option("--train-list", o.split.train_list, "lists split: file with one training image name per line");
+  app.add_option("--test-list", o.split.test_list, "lists split: file with one test image name per line");
+  app.add_option("--clutter-ratio", o.split.clutter_ratio, "robustnerf split: share of cluttered training views (0..1)");
+  app.add_option("--tsv", o.split.tsv, "phototourism split: the .tsv split file");
+  app.add_option("--eval-every", o.eval_every, "evaluate test views every N steps (0: only at the end)")
+      ->capture_default_str();
+  app.add_option("--checkpoint-every", o.checkpoint_every, "write a checkpoint every N steps (0: only at the end)")
+      ->capture_default_str();
+  app.add_option("--log-every", o.log_every, "when not on a terminal, print a progress line every N steps")
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  if (o.data_dir.empty() && o.images_dir.empty()) {
+    std::fprintf(stderr, "desplat_train: give --data DIR (COLMAP scene) or --images DIR (photos)\n");
+    return 2;
+  }
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  try {
+    o.split.rule = desplat::split_rule_from_name(split_rule);
+    return desplat::run_training(o, g_stop);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "desplat_train: error: %s\n", e.what());
+    return 1;
+  }
+}
