@@ -36,6 +36,7 @@ struct TrainableGaussians {
   std::vector<float> absgrad_sum;     // [N] Σ over steps of the absgrad statistic
   std::vector<int32_t> visible_count; // [N] steps in which the Gaussian was visible
   std::vector<float> max_screen_radius;  // [N] max over steps of radius / max(W, H)
+  bool statistics_empty = true;          // no step recorded since the last reset
 
   explicit TrainableGaussians(GaussianSet initial = {});
   size_t size() const { return params.size(); }

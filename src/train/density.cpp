@@ -88,9 +88,19 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
       const float size = max_scale(g.params, i);
       const bool big_on_screen = step < s.stop_screen_size_at && g.max_screen_radius[i] > s.split_screen_size;
       split[i] = size > s.size_threshold || big_on_screen;
-      dup[i] = size <= s.size_threshold;
     }
     const GaussianSet split_set = split_samples(g.params, split, s.split_samples, s.split_scale_factor, rng);
+    // As Splatfacto: the originals of split Gaussians shrink in place before the
+    // duplicate test, so a Gaussian split for its screen size (or just above the size
+    // threshold) is also duplicated, with the reduced scale.
+    for (size_t i = 0; i < n; ++i)
+      if (split[i])
+        for (int k = 0; k < 3; ++k) g.params.log_scales[3 * i + k] -= std::log(s.split_scale_factor);
+    for (size_t i = 0; i < n; ++i) {
+      if (g.visible_count[i] == 0) continue;
+      const float mean_grad = g.absgrad_sum[i] / float(g.visible_count[i]) * 0.5f * float(image_size);
+      dup[i] = mean_grad > s.grad_threshold && max_scale(g.params, i) <= s.size_threshold;
+    }
     const GaussianSet dup_set = copy_rows(g.params, dup);
     report.split = std::count(split.begin(), split.end(), 1);
     report.duplicated = std::count(dup.begin(), dup.end(), 1);

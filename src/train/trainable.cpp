@@ -80,6 +80,7 @@ void TrainableGaussians::append(const GaussianSet& extra) {
 }
 
 void TrainableGaussians::reset_statistics() {
+  statistics_empty = true;
   absgrad_sum.assign(size(), 0.0f);
   visible_count.assign(size(), 0);
   max_screen_radius.assign(size(), 0.0f);
@@ -87,10 +88,15 @@ void TrainableGaussians::reset_statistics() {
 
 void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const RasterGradients& grads) {
   const float inv_size = 1.0f / float(std::max(fw.width, fw.height));
+  // As Splatfacto: the first step after a reset counts every Gaussian once (with a
+  // zero gradient where it was not visible); later steps count visible ones only.
+  const bool first = statistics_empty;
+  statistics_empty = false;
   for (size_t i = 0; i < size(); ++i) {
-    if (!fw.visible[i]) continue;
+    if (!fw.visible[i] && !first) continue;
     absgrad_sum[i] += grads.absgrad[i];
     visible_count[i] += 1;
+    if (!fw.visible[i]) continue;
     const float r = float(std::max(fw.radii[2 * i], fw.radii[2 * i + 1])) * inv_size;
     max_screen_radius[i] = std::max(max_screen_radius[i], r);
   }

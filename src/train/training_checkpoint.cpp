@@ -18,6 +18,7 @@ Checkpoint make_training_checkpoint(const Trainer& trainer, const nlohmann::json
   c.metadata = extra_metadata.is_object() ? extra_metadata : nlohmann::json::object();
   c.metadata["step"] = trainer.current_step();
   c.metadata["adam_step"] = g.adam_step;
+  c.metadata["statistics_empty"] = g.statistics_empty;
   c.metadata["sh_degree"] = g.params.sh_degree;
   c.metadata["color_mode"] = g.params.color_mode == ColorMode::RGB ? "rgb" : "sh";
   c.metadata["view_order_pos"] = t.view_order_pos;
@@ -67,6 +68,7 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   g.visible_count = c.get<int32_t>("static/stats/visible_count", {n});
   g.max_screen_radius = c.get<float>("static/stats/max_screen_radius", {n});
   g.adam_step = c.metadata.at("adam_step").get<int64_t>();
+  g.statistics_empty = c.metadata.at("statistics_empty").get<bool>();
   g.check_consistent();
   trainer.view_order = c.get<int32_t>("trainer/view_order");
   trainer.view_order_pos = c.metadata.at("view_order_pos").get<int64_t>();
