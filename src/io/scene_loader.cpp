@@ -1,1 +1,396 @@
-// placeholder: being written
+// COLMAP capture -> Scene (see include/desplat/scene.hpp for the rules this implements).
+#include "desplat/scene.hpp"
+
+#include <OpenImageIO/imageio.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <map>
+#include <optional>
+
+#include "desplat/camera_models.hpp"
+
+namespace desplat {
+namespace {
+
+namespace fs = std::filesystem;
+
+// ---- Folders, model, image headers ------------------------------------------------------------
+
+fs::path require_dir(const fs::path& dir, const std::string& what) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw SceneError(dir.string() + ": missing " + what + " folder");
+  return dir;
+}
+
+// The cache must not land in the input, which may be read-only or shared.
+void require_outside(const fs::path& cache, const fs::path& data) {
+  std::error_code ec;
+  const fs::path rel = fs::weakly_canonical(cache, ec).lexically_relative(fs::weakly_canonical(data, ec));
+  if (!rel.empty() && *rel.begin() != "..")
+    throw SceneError(cache.string() + ": the image cache must be outside the input folder " + data.string());
+}
+
+colmap::Model read_model_or_throw(const fs::path& sparse) {
+  try {
+    return colmap::read_model(sparse);
+  } catch (const colmap::ColmapError& e) {
+    throw SceneError(e.what());  // already names the file, place and problem
+  }
+}
+
+// The images file read_model used (it prefers the binary model).
+fs::path model_images_file(const fs::path& sparse) {
+  return fs::exists(sparse / "cameras.bin") ? sparse / "images.bin" : sparse / "images.txt";
+}
+
+struct Size {
+  int width = 0, height = 0;
+};
+
+// Size from the file's header, without decoding the pixels.
+Size read_image_size(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw SceneError(path.string() + ": image file is missing");
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) throw SceneError(path.string() + ": cannot read image: " + OIIO::geterror());
+  return {in->spec().width, in->spec().height};
+}
+
+std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+// ---- Normalization and poses -------------------------------------------------------------------
+
+Eigen::Matrix3d rotation_of(const colmap::Image& image) {
+  const auto& q = image.qvec_wxyz;
+  return Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
+}
+
+Eigen::Vector3d center_of(const colmap::Image& image) {
+  const Eigen::Vector3d t(image.tvec[0], image.tvec[1], image.tvec[2]);
+  return -(rotation_of(image).transpose() * t);
+}
+
+WorldNormalization normalization_of(const colmap::Model& model) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& [id, image] : model.images) mean += center_of(image);
+  mean /= static_cast<double>(model.images.size());
+  double extent = 0;
+  for (const auto& [id, image] : model.images) extent = std::max(extent, (center_of(image) - mean).cwiseAbs().maxCoeff());
+  WorldNormalization n;
+  n.center = {mean.x(), mean.y(), mean.z()};
+  n.scale = extent > 0 ? 1.0 / extent : 1.0;  // one camera (or coincident ones): keep the scale
+  return n;
+}
+
+// The rasterizer's camera: intrinsics of the undistorted pinhole, pose in the normalized frame.
+Camera view_camera(const colmap::Image& image, const colmap::Camera& pinhole, const WorldNormalization& n) {
+  const Eigen::Matrix3d R = rotation_of(image);
+  const Eigen::Vector3d c(n.center[0], n.center[1], n.center[2]);
+  const Eigen::Vector3d t = (R * c + Eigen::Vector3d(image.tvec[0], image.tvec[1], image.tvec[2])) * n.scale;
+  Camera cam;
+  cam.fx = static_cast<float>(pinhole.params[0]);
+  cam.fy = static_cast<float>(pinhole.params[1]);
+  cam.cx = static_cast<float>(pinhole.params[2]);
+  cam.cy = static_cast<float>(pinhole.params[3]);
+  cam.width = static_cast<int>(pinhole.width);
+  cam.height = static_cast<int>(pinhole.height);
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) cam.R_cw[3 * r + col] = static_cast<float>(R(r, col));
+    cam.t_cw[r] = static_cast<float>(t(r));
+  }
+  return cam;
+}
+
+// ---- Sources: images/ or images_N/ ------------------------------------------------------------
+
+struct Source {
+  fs::path dir;
+  std::map<std::string, Size> sizes;  // by image name
+};
+
+// Reads the header of every used view's file in `dir`; sizes must match the model's cameras.
+Source originals(const fs::path& images_dir, const fs::path& model_file, const colmap::Model& model,
+                 const std::vector<const colmap::Image*>& used) {
+  Source src{images_dir, {}};
+  for (const colmap::Image* image : used) {
+    const fs::path path = images_dir / image->name;
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec))
+      throw SceneError(path.string() + ": no file for image '" + image->name + "' (image id " +
+                       std::to_string(image->id) + " in " + model_file.string() + ")");
+    const Size s = read_image_size(path);
+    const colmap::Camera& cam = model.cameras.at(image->camera_id);
+    if (uint64_t(s.width) != cam.width || uint64_t(s.height) != cam.height)
+      throw SceneError(path.string() + ": image is " + size_text(s.width, s.height) + " px but its COLMAP camera " +
+                       std::to_string(cam.id) + " is " + size_text(int(cam.width), int(cam.height)) + " px");
+    src.sizes[image->name] = s;
+  }
+  return src;
+}
+
+bool within_one_pixel(int actual, uint64_t original, int n) {
+  return std::abs(static_cast<double>(actual) - static_cast<double>(original) / n) < 1.0;
+}
+
+// images_N/ when it is complete and its sizes fit W/N × H/N; otherwise the reason it is not.
+std::optional<Source> downscaled_folder(const fs::path& dir, int n, const colmap::Model& model,
+                                        const std::vector<const colmap::Image*>& used, std::string& why_not) {
+  Source src{dir, {}};
+  for (const colmap::Image* image : used) {
+    const fs::path path = dir / image->name;
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) {
+      why_not = path.string() + " is missing";
+      return std::nullopt;
+    }
+    Size s;
+    try {
+      s = read_image_size(path);
+    } catch (const SceneError& e) {
+      why_not = e.what();
+      return std::nullopt;
+    }
+    const colmap::Camera& cam = model.cameras.at(image->camera_id);
+    if (!within_one_pixel(s.width, cam.width, n) || !within_one_pixel(s.height, cam.height, n)) {
+      why_not = path.string() + " is " + size_text(s.width, s.height) + " px, expected " +
+                size_text(int(cam.width) / n, int(cam.height) / n) + " (the camera's " +
+                size_text(int(cam.width), int(cam.height)) + " / " + std::to_string(n) + ")";
+      return std::nullopt;
+    }
+    src.sizes[image->name] = s;
+  }
+  return src;
+}
+
+// ---- Cache --------------------------------------------------------------------------------------
+
+uint64_t fnv1a(const std::string& s) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : s) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+std::string camera_key(const colmap::Camera& c) {
+  char buf[64];
+  std::string s = std::to_string(static_cast<int>(c.model)) + " " + std::to_string(c.width) + " " +
+                  std::to_string(c.height);
+  for (double p : c.params) {
+    std::snprintf(buf, sizeof buf, " %.17g", p);
+    s += buf;
+  }
+  return s;
+}
+
+bool needs_processing(const SceneView& v) {
+  return uint64_t(v.source_width) != v.distorted_camera.width || uint64_t(v.source_height) != v.distorted_camera.height ||
+         camera_model_math(v.distorted_camera.model).has_distortion;
+}
+
+fs::path cache_path(const Scene& scene, const SceneView& v) {
+  std::error_code ec;
+  const fs::path source = fs::absolute(v.image_path).lexically_normal();
+  const auto bytes = fs::file_size(source, ec);
+  const auto mtime = fs::last_write_time(source, ec);
+  if (ec) throw SceneError(source.string() + ": cannot read the image file: " + ec.message());
+  const std::string key = "desplat view cache 1\n" + source.string() + "\n" + std::to_string(bytes) + "\n" +
+                          std::to_string(mtime.time_since_epoch().count()) + "\n" + std::to_string(scene.downscale) +
+                          "\n" + camera_key(v.distorted_camera) + "\n" + camera_key(v.undistorted_camera);
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(fnv1a(key)));
+  return scene.cache_dir / "views" / (v.image_path.stem().string() + "-" + hash + ".png");
+}
+
+// Writes next to `path` and renames into place, so readers never see a partial file.
+void write_atomically(const fs::path& path, const FloatImage& image) {
+  static std::atomic<unsigned> counter{0};
+  const fs::path tmp = path.parent_path() / (path.stem().string() + ".tmp" + std::to_string(::getpid()) + "-" +
+                                             std::to_string(counter++) + ".png");
+  try {
+    write_image(tmp, image);
+    fs::rename(tmp, path);
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw SceneError("cannot write the image cache " + path.string() + ": " + e.what());
+  }
+}
+
+void warn(const WarningSink& sink, std::vector<std::string>* log, const std::string& message) {
+  if (log) log->push_back(message);
+  if (sink) sink(message);
+  else std::cerr << "desplat: warning: " << message << "\n";
+}
+
+FloatImage read_checked(const fs::path& path, int width, int height) {
+  FloatImage img;
+  try {
+    img = read_image_rgb(path);
+  } catch (const ImageError& e) {
+    throw SceneError(e.what());
+  }
+  if (img.width != width || img.height != height)
+    throw SceneError(path.string() + ": image is now " + size_text(img.width, img.height) + " px, expected " +
+                     size_text(width, height) + " (it changed after the scene was loaded)");
+  return img;
+}
+
+// The source pixels resized to the training size and undistorted.
+FloatImage process(const SceneView& v) {
+  FloatImage img = read_checked(v.image_path, v.source_width, v.source_height);
+  img = resize_area(img, int(v.distorted_camera.width), int(v.distorted_camera.height));
+  return undistort_image(img, v.distorted_camera, v.undistorted_camera);
+}
+
+// ---- Assembly -------------------------------------------------------------------------------------
+
+std::vector<const colmap::Image*> sorted_by_name(const colmap::Model& model) {
+  std::vector<const colmap::Image*> images;
+  for (const auto& [id, image] : model.images) images.push_back(&image);
+  std::sort(images.begin(), images.end(), [](auto* a, auto* b) { return a->name < b->name; });
+  return images;
+}
+
+// Picks images_N/ or images/ for the used views.
+Source choose_source(const fs::path& data, const SceneOptions& options, const fs::path& model_file,
+                     const colmap::Model& model, const std::vector<const colmap::Image*>& used, Scene& scene) {
+  const fs::path images_dir = data / "images";
+  const int n = options.downscale;
+  const fs::path scaled = data / ("images_" + std::to_string(n));
+  std::error_code ec;
+  if (n > 1 && fs::is_directory(scaled, ec)) {
+    std::string why_not;
+    if (auto src = downscaled_folder(scaled, n, model, used, why_not)) return *src;
+    warn(options.on_warning, &scene.warnings,
+         "ignoring " + scaled.string() + ": " + why_not + "; downscaling " + images_dir.string() + " instead");
+  }
+  return originals(images_dir, model_file, model, used);
+}
+
+void add_points(const colmap::Model& model, const fs::path& sparse, const SceneOptions& options, Scene& scene) {
+  for (const auto& [id, p] : model.points) {
+    const auto x = scene.normalization.to_normalized(p.xyz);
+    scene.points_xyz.push_back({float(x[0]), float(x[1]), float(x[2])});
+    scene.points_rgb.push_back(p.rgb);
+    scene.point_ids.push_back(id);
+  }
+  if (model.points.empty())
+    warn(options.on_warning, &scene.warnings,
+         sparse.string() + ": the model has no 3D points; training will start from random points");
+}
+
+}  // namespace
+
+std::vector<size_t> Scene::train_views() const {
+  std::vector<size_t> out;
+  for (size_t i = 0; i < views.size(); ++i)
+    if (!views[i].is_test) out.push_back(i);
+  return out;
+}
+
+std::vector<size_t> Scene::test_views() const {
+  std::vector<size_t> out;
+  for (size_t i = 0; i < views.size(); ++i)
+    if (views[i].is_test) out.push_back(i);
+  return out;
+}
+
+fs::path default_cache_dir() {
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return fs::path(xdg) / "desplat";
+  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "desplat";
+  return fs::temp_directory_path() / "desplat-cache";
+}
+
+Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
+  if (options.downscale < 1) throw SceneError("downscale must be at least 1, got " + std::to_string(options.downscale));
+  const fs::path data = fs::absolute(data_dir).lexically_normal();
+  require_dir(data, "scene");
+  require_dir(data / "images", "images/");
+  const fs::path sparse = require_dir(data / "sparse" / "0", "sparse/0/");
+  const colmap::Model model = read_model_or_throw(sparse);
+  if (model.images.empty()) throw SceneError(model_images_file(sparse).string() + ": the model has no registered images");
+
+  Scene scene;
+  scene.data_dir = data;
+  scene.downscale = options.downscale;
+  scene.cache_dir = fs::absolute(options.cache_dir.empty() ? default_cache_dir() : options.cache_dir);
+  require_outside(scene.cache_dir, data);
+  scene.on_warning = options.on_warning;
+  scene.normalization = normalization_of(model);
+
+  const std::vector<const colmap::Image*> images = sorted_by_name(model);
+  std::vector<std::string> names;
+  for (const auto* image : images) names.push_back(image->name);
+  std::vector<ViewRole> roles;
+  try {
+    roles = assign_split(names, options.split);
+  } catch (const SplitError& e) {
+    throw SceneError(e.what());
+  }
+  std::vector<const colmap::Image*> used;
+  for (size_t i = 0; i < images.size(); ++i)
+    if (roles[i] != ViewRole::Unused) used.push_back(images[i]);
+
+  const Source source = choose_source(data, options, model_images_file(sparse), model, used, scene);
+  for (size_t i = 0; i < images.size(); ++i) {
+    if (roles[i] == ViewRole::Unused) continue;
+    const colmap::Image& image = *images[i];
+    const colmap::Camera& lens = model.cameras.at(image.camera_id);
+    const Size src = source.sizes.at(image.name);
+    const bool own_resize = source.dir == data / "images";
+    const uint64_t w = own_resize ? std::max<uint64_t>(1, lens.width / options.downscale) : uint64_t(src.width);
+    const uint64_t h = own_resize ? std::max<uint64_t>(1, lens.height / options.downscale) : uint64_t(src.height);
+    SceneView v;
+    v.name = image.name;
+    v.image_path = source.dir / image.name;
+    v.is_test = roles[i] == ViewRole::Test;
+    v.colmap_image_id = image.id;
+    v.source_width = src.width;
+    v.source_height = src.height;
+    v.distorted_camera = w == lens.width && h == lens.height ? lens : rescale_camera(lens, w, h);
+    try {
+      v.undistorted_camera = undistort_camera(v.distorted_camera, options.undistort);
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(sparse.string() + ": camera " + std::to_string(lens.id) + ": " + e.what());
+    }
+    v.camera = view_camera(image, v.undistorted_camera, scene.normalization);
+    scene.views.push_back(std::move(v));
+  }
+  add_points(model, sparse, options, scene);
+  return scene;
+}
+
+fs::path view_cache_path(const Scene& scene, size_t view) {
+  if (view >= scene.views.size())
+    throw SceneError("view " + std::to_string(view) + " does not exist (the scene has " +
+                     std::to_string(scene.views.size()) + ")");
+  const SceneView& v = scene.views[view];
+  return needs_processing(v) ? cache_path(scene, v) : fs::path();
+}
+
+FloatImage load_view_image(const Scene& scene, size_t view) {
+  const fs::path cached = view_cache_path(scene, view);
+  const SceneView& v = scene.views[view];
+  const int w = v.camera.width, h = v.camera.height;
+  if (cached.empty()) return read_checked(v.image_path, w, h);
+  std::error_code ec;
+  if (fs::exists(cached, ec)) {
+    try {
+      return read_checked(cached, w, h);
+    } catch (const SceneError& e) {
+      warn(scene.on_warning, nullptr, std::string("rebuilding a bad cache file: ") + e.what());
+    }
+  }
+  fs::create_directories(cached.parent_path(), ec);
+  if (ec) throw SceneError("cannot create the image cache folder " + cached.parent_path().string() + ": " + ec.message());
+  write_atomically(cached, process(v));
+  return read_checked(cached, w, h);  // what every later load returns, bit for bit
+}
+
+}  // namespace desplat
