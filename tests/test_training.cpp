@@ -114,3 +114,23 @@ TEST(Training, ResumeReproducesUninterruptedRunBitExactly) {
 
 }  // namespace
 }  // namespace desplat::test
+
+namespace desplat::test {
+namespace {
+
+TEST(Training, NoPointsInitializesRandomlyInACube) {
+  TrainingData data = synthetic_training_data(8, 64, 48, 9);
+  data.points.clear();
+  data.colors.clear();
+  TrainConfig cfg = short_config(10);
+  cfg.random_init_points = 5000;  // the default is 50,000 (REFERENCE.md §5); fewer keeps the test fast
+  Trainer trainer(data, cfg);
+  ASSERT_EQ(trainer.gaussians().size(), 5000u);
+  for (float m : trainer.gaussians().params.means) ASSERT_LE(std::abs(m), cfg.random_init_extent);
+  EXPECT_EQ(TrainConfig{}.random_init_points, 50000);
+  for (int i = 0; i < 5; ++i) trainer.step();
+  trainer.mutable_gaussians().check_consistent();
+}
+
+}  // namespace
+}  // namespace desplat::test
