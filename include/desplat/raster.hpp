@@ -82,6 +82,9 @@ struct RasterGradients {
   // Densification statistic (REFERENCE.md §3): per Gaussian, the 2-norm of
   // (Σ_pixels |∂L/∂μ2d.x|, Σ_pixels |∂L/∂μ2d.y|) [loss units per px].
   std::vector<float> absgrad;         // [N]
+
+  // Scratch reused between calls: one gradient record per tile entry.
+  std::vector<float> entry_scratch;
 };
 
 // Renders `gaussians` seen from `camera`. Throws std::invalid_argument for bad input

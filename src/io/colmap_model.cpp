@@ -495,19 +495,19 @@ void validate_model(const Model& model, const ModelPaths& paths) {
     if (id != cam.id)
       throw ColmapError(file_prefix(paths.cameras) + "camera map key " + num(id) +
                         " holds camera id " + num(cam.id));
-    with_prefix(file_prefix(paths.cameras), [&] { check_camera(cam); });
+    with_prefix(file_prefix(paths.cameras), [&camera = cam] { check_camera(camera); });
   }
   for (const auto& [id, img] : model.images) {
     if (id != img.id)
       throw ColmapError(file_prefix(paths.images) + "image map key " + num(id) +
                         " holds image id " + num(img.id));
-    with_prefix(file_prefix(paths.images), [&] { check_image(img); });
+    with_prefix(file_prefix(paths.images), [&image = img] { check_image(image); });
   }
   for (const auto& [id, pt] : model.points) {
     if (id != pt.id)
       throw ColmapError(file_prefix(paths.points) + "point3D map key " + num(id) +
                         " holds point3D id " + num(pt.id));
-    with_prefix(file_prefix(paths.points), [&] { check_point(pt); });
+    with_prefix(file_prefix(paths.points), [&point = pt] { check_point(point); });
   }
   check_image_references(model, paths);
   check_tracks(model, paths);

@@ -5,9 +5,6 @@
 // reader is strict: it rejects anything it would have to guess about or drop.
 #include "desplat/ply.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <bit>
 #include <cerrno>
@@ -17,12 +14,15 @@
 #include <cstring>
 #include <fstream>
 #include <optional>
+#include <ostream>
 #include <set>
 #include <string>
 #include <string_view>
 #include <system_error>
 #include <utility>
 #include <vector>
+
+#include "desplat/atomic_file.hpp"
 
 namespace desplat {
 namespace fs = std::filesystem;
@@ -181,57 +181,26 @@ std::string header_text(std::size_t n, const std::vector<Column>& cols) {
   return h + "end_header\n";
 }
 
-std::string errno_text() { return std::error_code(errno, std::generic_category()).message(); }
-
-// "<path>.tmp", written then renamed over the target; removed if never committed.
-class AtomicFile {
- public:
-  explicit AtomicFile(const fs::path& target) : target_(target), tmp_(fs::path(target) += ".tmp") {
-    fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd_ < 0) fail(target_, "cannot create " + tmp_.string() + ": " + errno_text());
-  }
-  AtomicFile(const AtomicFile&) = delete;
-  AtomicFile& operator=(const AtomicFile&) = delete;
-  ~AtomicFile() {
-    if (fd_ >= 0) ::close(fd_);
-    if (!committed_) ::unlink(tmp_.c_str());
-  }
-
-  void write(const unsigned char* data, std::size_t n) {
-    while (n > 0) {
-      const ssize_t w = ::write(fd_, data, n);
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) fail(target_, "write to " + tmp_.string() + " failed: " + errno_text());
-      data += w;
-      n -= static_cast<std::size_t>(w);
+// Encodes Gaussians [first, first + count) as packed little-endian records into `out`.
+void encode_records(const fs::path& path, const std::vector<Source>& sources, std::size_t first,
+                    std::size_t count, const ToOriginal& convert, unsigned char* out) {
+  for (std::size_t i = first; i < first + count; ++i) {
+    for (const Source& s : sources) {
+      float v = 0;  // normals
+      if (s.base) {
+        v = convert(s.column->field, s.column->offset, s.base[i * s.stride + s.column->offset]);
+        // A value our own reader would reject must not reach the file.
+        if (!std::isfinite(v))
+          fail(path, "Gaussian " + std::to_string(i) + " property '" + s.column->name + "' is " +
+                         describe_nonfinite(v) + " in the original frame");
+      }
+      store_le_float(v, out);
+      out += 4;
     }
   }
+}
 
-  void commit() {
-    if (::fsync(fd_) != 0) fail(target_, "fsync of " + tmp_.string() + " failed: " + errno_text());
-    const int fd = fd_;
-    fd_ = -1;
-    if (::close(fd) != 0) fail(target_, "close of " + tmp_.string() + " failed: " + errno_text());
-    if (::rename(tmp_.c_str(), target_.c_str()) != 0)
-      fail(target_, "rename from " + tmp_.string() + " failed: " + errno_text());
-    committed_ = true;
-    sync_directory();
-  }
-
- private:
-  // Makes the rename itself durable; best effort (some filesystems refuse).
-  void sync_directory() const {
-    const fs::path dir = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
-    const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (dfd < 0) return;
-    (void)::fsync(dfd);
-    ::close(dfd);
-  }
-
-  fs::path target_, tmp_;
-  int fd_ = -1;
-  bool committed_ = false;
-};
+std::string errno_text() { return std::error_code(errno, std::generic_category()).message(); }
 
 }  // namespace
 
@@ -241,33 +210,23 @@ void write_gaussian_ply(const fs::path& path, const GaussianSet& gaussians, cons
   const ToOriginal convert(norm);
   const std::size_t n = gaussians.size(), record = 4 * cols.size();
 
-  AtomicFile file(path);
-  const std::string header = header_text(n, cols);
-  file.write(reinterpret_cast<const unsigned char*>(header.data()), header.size());
-
   const std::vector<Source> sources = sources_of(gaussians, cols);
-  const std::size_t per_chunk = std::max<std::size_t>(1, kChunkBytes / record);
-  std::vector<unsigned char> buf(std::min(n, per_chunk) * record);
-  for (std::size_t first = 0; first < n; first += per_chunk) {
-    const std::size_t count = std::min(per_chunk, n - first);
-    unsigned char* out = buf.data();
-    for (std::size_t i = first; i < first + count; ++i) {
-      for (const Source& s : sources) {
-        float v = 0;  // normals
-        if (s.base) {
-          v = convert(s.column->field, s.column->offset, s.base[i * s.stride + s.column->offset]);
-          // A value our own reader would reject must not reach the file.
-          if (!std::isfinite(v))
-            fail(path, "Gaussian " + std::to_string(i) + " property '" + s.column->name + "' is " +
-                           describe_nonfinite(v) + " in the original frame");
-        }
-        store_le_float(v, out);
-        out += 4;
-      }
+  const auto write_body = [&](std::ostream& out) {
+    const std::string header = header_text(n, cols);
+    out.write(header.data(), static_cast<std::streamsize>(header.size()));
+    const std::size_t per_chunk = std::max<std::size_t>(1, kChunkBytes / record);
+    std::vector<unsigned char> buf(std::min(n, per_chunk) * record);
+    for (std::size_t first = 0; first < n; first += per_chunk) {
+      const std::size_t count = std::min(per_chunk, n - first);
+      encode_records(path, sources, first, count, convert, buf.data());
+      out.write(reinterpret_cast<const char*>(buf.data()), static_cast<std::streamsize>(count * record));
     }
-    file.write(buf.data(), count * record);
+  };
+  try {
+    write_file_atomically(path, write_body);
+  } catch (const AtomicWriteError& e) {
+    throw PlyError(e.what());  // already starts with the path
   }
-  file.commit();
 }
 
 // ---------------------------------------------------------------------------

@@ -15,18 +15,12 @@ namespace desplat {
 namespace {
 using namespace raster;
 
-// ∂L with respect to one Gaussian's 2D quantities, from the pixels of one tile.
-struct EntryGrad {
-  float mean2d[2];
-  float conic[3];
-  float opacity;  // ∂L/∂o (after the sigmoid)
-  float rgb[3];
-  float depth;
-  float abs_mean2d[2];  // Σ |per-pixel ∂L/∂μ2d|, the densification statistic
-};
+// Per (tile, Gaussian) entry, the gradient with respect to the Gaussian's 2D
+// quantities from that tile's pixels: kEntrySlots floats in this order.
+enum EntrySlot { kR, kG, kB, kZ, kO, kA, kB2, kC, kMx, kMy, kAbsX, kAbsY, kEntrySlots };
 
 void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                   const float* dA, const float* dD, EntryGrad* entry_grads) {
+                   const float* dA, const float* dD, float* entry_grads) {
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
@@ -60,7 +54,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
 
   const int begin = fw.tile_offsets[tile], end = fw.tile_offsets[tile + 1];
   // Entries after the last blended one in every pixel get zero gradient.
-  for (int k = max_last + 1; k < end - begin; ++k) entry_grads[begin + k] = EntryGrad{};
+  std::fill(entry_grads + size_t(begin + max_last + 1) * kEntrySlots, entry_grads + size_t(end) * kEntrySlots, 0.0f);
   for (int k = max_last; k >= 0; --k) {
     const int32_t g = fw.tile_entries[begin + k];
     const float mx = fw.means2d[2 * g], my = fw.means2d[2 * g + 1];
@@ -69,8 +63,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     const float cr = fw.rgb[3 * g], cg = fw.rgb[3 * g + 1], cb = fw.rgb[3 * g + 2];
     // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
     // and the lanes are summed in a fixed order afterwards (deterministic).
-    enum { kR, kG, kB, kZ, kO, kA, kB2, kC, kMx, kMy, kAbsX, kAbsY, kSums };
-    alignas(64) float acc[kSums][S] = {};
+    alignas(64) float acc[kEntrySlots][S] = {};
     int r0, r1;
     box_rows_in_tile(my, fw.radii[2 * g + 1], y0, rows, r0, r1);
     for (int r = r0; r <= r1; ++r) {
@@ -118,13 +111,11 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
         T[j] = hit > 0.0f ? t_before : T[j];
       }
     }
-    float sum[kSums];
-    for (int q = 0; q < kSums; ++q) {
-      sum[q] = 0;
-      for (int col = 0; col < S; ++col) sum[q] += acc[q][col];
+    float* record = entry_grads + size_t(begin + k) * kEntrySlots;
+    for (int q = 0; q < kEntrySlots; ++q) {
+      record[q] = 0;
+      for (int col = 0; col < S; ++col) record[q] += acc[q][col];
     }
-    entry_grads[begin + k] = EntryGrad{{sum[kMx], sum[kMy]}, {sum[kA], sum[kB2], sum[kC]}, sum[kO],
-                                       {sum[kR], sum[kG], sum[kB]}, sum[kZ], {sum[kAbsX], sum[kAbsY]}};
   }
 }
 
@@ -159,13 +150,14 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   grads.absgrad.assign(n, 0.0f);
 
   const TileGrid grid(cam.width, cam.height);
-  std::vector<EntryGrad> entry_grads(fw.tile_entries.size());
+  grads.entry_scratch.resize(fw.tile_entries.size() * kEntrySlots);
+  float* entry_grads = grads.entry_scratch.data();
   const int threads = thread_count(s);
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
   for (int tile = 0; tile < grid.count(); ++tile)
     backward_tile(grid, tile, fw, dL_dcolor.empty() ? nullptr : dL_dcolor.data(),
                   dL_dalpha.empty() ? nullptr : dL_dalpha.data(),
-                  dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads.data());
+                  dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads);
 
   const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
   const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
@@ -178,25 +170,22 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(n); ++i) {
     if (!fw.visible[i]) continue;
-    EntryGrad sum{};
+    float sum[kEntrySlots] = {};
     for (int32_t e = fw.gaussian_offsets[i]; e < fw.gaussian_offsets[i + 1]; ++e) {
-      const EntryGrad& eg = entry_grads[fw.entry_of_gaussian[e]];
-      for (int k = 0; k < 2; ++k) sum.mean2d[k] += eg.mean2d[k], sum.abs_mean2d[k] += eg.abs_mean2d[k];
-      for (int k = 0; k < 3; ++k) sum.conic[k] += eg.conic[k], sum.rgb[k] += eg.rgb[k];
-      sum.opacity += eg.opacity;
-      sum.depth += eg.depth;
+      const float* record = entry_grads + size_t(fw.entry_of_gaussian[e]) * kEntrySlots;
+      for (int q = 0; q < kEntrySlots; ++q) sum[q] += record[q];
     }
-    grads.means2d[2 * i] = sum.mean2d[0];
-    grads.means2d[2 * i + 1] = sum.mean2d[1];
-    grads.absgrad[i] = std::hypot(sum.abs_mean2d[0], sum.abs_mean2d[1]);
+    grads.means2d[2 * i] = sum[kMx];
+    grads.means2d[2 * i + 1] = sum[kMy];
+    grads.absgrad[i] = std::hypot(sum[kAbsX], sum[kAbsY]);
 
     // Opacity: o = sigmoid(logit).
     const float o = fw.opacity[i];
-    grads.opacity_logits[i] = sum.opacity * o * (1.0f - o);
+    grads.opacity_logits[i] = sum[kO] * o * (1.0f - o);
 
     // Color: the clamp passes the gradient only where it was inactive.
     Vec3<float> d_rgb;
-    for (int ch = 0; ch < 3; ++ch) d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : sum.rgb[ch];
+    for (int ch = 0; ch < 3; ++ch) d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : sum[kR + ch];
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     Vec3<float> d_mean = Vec3<float>::Zero();
     float* d_colors = &grads.colors[color_stride * i];
@@ -208,13 +197,13 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
 
     // Conic → 2D covariance → camera-space point and covariance → 3D parameters.
     const Vec3<float> conic(fw.conics[3 * i], fw.conics[3 * i + 1], fw.conics[3 * i + 2]);
-    const Mat2<float> d_cov2d = conic_vjp(conic, Vec3<float>(sum.conic[0], sum.conic[1], sum.conic[2]));
+    const Mat2<float> d_cov2d = conic_vjp(conic, Vec3<float>(sum[kA], sum[kB2], sum[kC]));
     const Vec3<float> p = W * mean + t;
     const Mat3<float> Sigma = covariance_3d<float>(&g.log_scales[3 * i], &g.quats[4 * i]);
     const Mat3<float> V = W * Sigma * W.transpose();
     Vec3<float> d_p;
     Mat3<float> d_V;
-    project_ewa_vjp(p, V, K, Vec2<float>(sum.mean2d[0], sum.mean2d[1]), d_cov2d, sum.depth, d_p, d_V);
+    project_ewa_vjp(p, V, K, Vec2<float>(sum[kMx], sum[kMy]), d_cov2d, sum[kZ], d_p, d_V);
     d_mean += W.transpose() * d_p;
     covariance_3d_vjp(&g.log_scales[3 * i], &g.quats[4 * i], W.transpose() * d_V * W,
                       &grads.log_scales[3 * i], &grads.quats[4 * i]);

@@ -2,7 +2,6 @@
 // "static/adam_v/<group>", "static/stats/<name>", "trainer/view_order".
 #include "desplat/training_checkpoint.hpp"
 
-#include <sstream>
 
 namespace desplat {
 namespace {
@@ -22,9 +21,7 @@ Checkpoint make_training_checkpoint(const Trainer& trainer, const nlohmann::json
   c.metadata["sh_degree"] = g.params.sh_degree;
   c.metadata["color_mode"] = g.params.color_mode == ColorMode::RGB ? "rgb" : "sh";
   c.metadata["view_order_pos"] = t.view_order_pos;
-  std::ostringstream rng;
-  rng << t.rng();
-  c.metadata["rng"] = rng.str();
+  c.metadata["rng"] = save_rng_state(t.rng());
   const uint64_t n = g.size();
   for (int k = 0; k < kParamGroups; ++k) {
     const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
@@ -72,9 +69,7 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   g.check_consistent();
   trainer.view_order = c.get<int32_t>("trainer/view_order");
   trainer.view_order_pos = c.metadata.at("view_order_pos").get<int64_t>();
-  std::istringstream rng(c.metadata.at("rng").get<std::string>());
-  rng >> trainer.rng();
-  if (!rng) throw CheckpointError(c.source.string() + ": the RNG state in the metadata is malformed");
+  restore_rng_state(trainer.rng(), c.metadata.at("rng").get<std::string>());
   trainer.set_step(c.metadata.at("step").get<int64_t>());
 }
 
