@@ -1,0 +1,133 @@
+// Structure from motion for a folder of photos, by running the `colmap` 3.8 executable
+// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → mapper.
+//
+// Output layout (what the rest of desplat reads), under SfmOptions::out:
+//   images/          a symlink to the input folder (absolute target; the input may be
+//                    read-only), or a copy with copy_images; left alone when the input already
+//                    is <out>/images
+//   database.db      colmap's feature and match database
+//   sparse/0/        {cameras,images,points3D}.bin: the model with the most registered images;
+//                    mapper's other models (if any) follow as sparse/1, sparse/2, … by size
+//   colmap.log       everything colmap printed, stage by stage, with each command line
+//   image_list.txt   the photos handed to colmap (names relative to images/)
+//
+// Failures are SfmError with one message that says what went wrong and what to do. A run
+// never leaves a child process behind and cannot block on colmap's output; colmap killed by
+// a signal is reported like a non-zero exit.
+//
+// Thread safety: run_sfm only touches files under `out`; concurrent runs need distinct `out`.
+// It reads PATH at call time, and needs SIGCHLD not to be ignored (to read colmap's exit status).
+// colmap runs without a shell (paths need no quoting), stdin from /dev/null, default signal
+// dispositions; Ctrl-C reaches it through the terminal's process group and is reported as
+// "killed by signal 2".
+#pragma once
+
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace desplat::sfm {
+
+enum class SfmErrorKind {
+  BadOptions,        // e.g. unknown camera model, min_registered < 2
+  ColmapMissing,     // the executable is not on PATH (or not executable)
+  BadImages,         // images folder missing, empty, or without readable images; too few photos
+  OutputExists,      // earlier results in `out` and overwrite is off, or `out` unusable
+  StageFailed,       // a colmap stage exited non-zero or was killed by a signal
+  NoModel,           // the mapper produced no model
+  TooFewRegistered,  // the best model holds fewer than min_registered photos (it is kept)
+};
+
+class SfmError : public std::runtime_error {
+ public:
+  SfmError(SfmErrorKind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
+  SfmErrorKind kind() const { return kind_; }
+
+ private:
+  SfmErrorKind kind_;
+};
+
+enum class Matcher { Auto, Exhaustive, Sequential, Spatial };
+
+// Auto: exhaustive for up to this many photos, sequential above. Exhaustive matching costs
+// O(n²) image pairs: 50 fox photos at 540×960 took 5.4 min on 2 cores (0.26 s per pair), so 100
+// photos is ~20 min, and 300 would be ~3 h; sequential matching (each photo against its 10
+// neighbours in file-name order, plus quadratic overlap) is linear in n.
+inline constexpr int kExhaustiveMaxImages = 100;
+
+// "auto", "exhaustive", "sequential", "spatial" (exact); nullopt otherwise.
+std::optional<Matcher> matcher_from_name(const std::string& name);
+const char* matcher_name(Matcher matcher);
+// Auto resolved for `num_images` photos; any other value is returned unchanged.
+Matcher choose_matcher(Matcher requested, int num_images);
+// Auto minimum of registered photos: max(3, ⌈n/2⌉). Fewer than half placed means the capture
+// mostly failed; training on the rest would silently drop most of the user's photos.
+int default_min_registered(int num_images);
+
+enum class SfmStage { Extract, Match, Map };
+
+// One progress report. `done`/`total` count images (extraction), blocks or images (matching,
+// see `unit`), or registered photos of the model being built (mapping; total = all photos).
+struct SfmProgress {
+  SfmStage stage = SfmStage::Extract;
+  int done = 0;
+  int total = 0;          // 0 when not known yet
+  int model = 1;          // mapping: 1-based index of the model being built
+  const char* unit = "";  // "image", "block"
+  bool finished = false;  // the stage's last report
+};
+
+// "extracting features: image 12/50", "matching: block 3/7", "mapping: registered 31/50 photos".
+std::string describe(const SfmProgress& progress);
+
+using ProgressFn = std::function<void(const SfmProgress&)>;
+
+// A ProgressFn for a terminal: on a TTY it rewrites one line in place (at most ~10 times a
+// second); otherwise it prints plain lines, at most one per `plain_interval_s` per stage plus each
+// stage's last one. `out` must outlive the returned function.
+ProgressFn terminal_progress(std::FILE* out, bool is_tty, double plain_interval_s = 5.0);
+
+struct SfmOptions {
+  std::filesystem::path images;  // folder of photos (searched recursively; read only)
+  std::filesystem::path out;     // created if missing
+  Matcher matcher = Matcher::Auto;
+  std::string camera_model = "OPENCV";  // any COLMAP camera model name (colmap.hpp)
+  bool single_camera = false;           // one shared camera for all photos (same camera, zoom)
+  std::optional<int> min_registered;    // nullopt: default_min_registered(photos found)
+  int num_threads = -1;                 // colmap's: -1 = all cores
+  bool copy_images = false;             // copy the photos into <out>/images instead of a symlink
+  bool overwrite = false;               // replace database.db, sparse/ and the log of an earlier run
+  std::string colmap = "colmap";        // executable: a name looked up on PATH, or a path
+  ProgressFn on_progress;               // may be empty
+};
+
+struct SfmResult {
+  std::filesystem::path images_dir;  // <out>/images
+  std::filesystem::path sparse_dir;  // <out>/sparse/0
+  std::filesystem::path database;    // <out>/database.db
+  std::filesystem::path log;         // <out>/colmap.log
+  Matcher matcher = Matcher::Exhaustive;  // as resolved
+  int num_photos = 0;                // readable photos found and handed to colmap
+  int num_registered = 0;            // photos in sparse/0
+  int num_points = 0;                // 3D points in sparse/0
+  int num_models = 0;                // models mapper wrote
+  double seconds = 0;                // wall time of the whole run
+  double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // wall time of each stage
+};
+
+// Runs the whole pipeline; see the file comment for the layout and errors.
+SfmResult run_sfm(const SfmOptions& options);
+
+// Photos colmap can be given: regular files under `dir` (recursive, hidden entries skipped)
+// with an image extension whose header OpenImageIO can read; paths relative to `dir`, sorted.
+// SfmError(BadImages) when `dir` is missing or not a folder (an empty result is not an error).
+std::vector<std::filesystem::path> find_photos(const std::filesystem::path& dir);
+
+// Absolute path of `name` (searched on PATH unless it contains '/'), if it is an executable file.
+std::optional<std::filesystem::path> find_executable(const std::string& name);
+
+}  // namespace desplat::sfm
