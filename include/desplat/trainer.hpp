@@ -41,7 +41,8 @@ struct TrainConfig {
   int num_downscales = 2;         // train at 2^num_downscales lower resolution first …
   int resolution_schedule = 3000; // … halving the factor every this many steps
   float ssim_lambda = 0.2f;
-  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this at `iterations`
+  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this …
+  int64_t means_lr_decay_steps = 30000;  // … over this many steps, whatever `iterations` is (Splatfacto)
   LearningRates lr;
   DensifySettings densify;
   bool random_background = true;

@@ -11,7 +11,10 @@
 namespace desplat {
 
 FloatImage read_image_rgb(const std::filesystem::path& path) {
-  auto in = OIIO::ImageInput::open(path.string());
+  // Keep color as stored: by default OpenImageIO premultiplies RGBA files by alpha.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(path.string(), &config);
   if (!in) throw ImageError("cannot read image " + path.string() + ": " + OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)

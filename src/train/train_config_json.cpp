@@ -24,6 +24,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"resolution_schedule", &c.resolution_schedule},
       {"ssim_lambda", &c.ssim_lambda},
       {"means_lr_final", &c.means_lr_final},
+      {"means_lr_decay_steps", &c.means_lr_decay_steps},
       {"lr.means", &c.lr.means},
       {"lr.log_scales", &c.lr.log_scales},
       {"lr.quats", &c.lr.quats},

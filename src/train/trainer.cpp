@@ -141,7 +141,7 @@ StepStats Trainer::step() {
   if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(forward_, grads_);
   LearningRates lr = config_.lr;
   // Exponential decay of the means' rate from lr.means to means_lr_final.
-  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.iterations)));
+  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
   gaussians_.adam_update(grads_, lr, AdamSettings{});
   stats.nonfinite_pruned = prune_nonfinite();
