@@ -41,6 +41,7 @@ struct TrainableGaussians {
   explicit TrainableGaussians(GaussianSet initial = {});
   size_t size() const { return params.size(); }
   std::vector<float>& param(ParamGroup g);
+  const std::vector<float>& param(ParamGroup g) const { return const_cast<TrainableGaussians&>(*this).param(g); }
   int floats_per_gaussian(ParamGroup g) const;
 
   // Keeps the rows where keep[i] != 0, in order, in every array.

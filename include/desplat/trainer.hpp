@@ -82,6 +82,7 @@ class Trainer {
   const TrainableGaussians& gaussians() const { return gaussians_; }
   TrainableGaussians& mutable_gaussians() { return gaussians_; }  // tests and checkpoints
   std::mt19937_64& rng() { return rng_; }
+  const std::mt19937_64& rng() const { return rng_; }
 
   // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped).
   FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;

@@ -133,10 +133,9 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
 
 void TrainableGaussians::check_consistent() const {
   const size_t n = size();
-  auto& self = const_cast<TrainableGaussians&>(*this);
   for (int g = 0; g < kParamGroups; ++g) {
     const size_t want = n * floats_per_gaussian(ParamGroup(g));
-    if (self.param(ParamGroup(g)).size() != want || adam_m[g].size() != want || adam_v[g].size() != want)
+    if (param(ParamGroup(g)).size() != want || adam_m[g].size() != want || adam_v[g].size() != want)
       throw std::logic_error("parameter group " + std::to_string(g) + " is out of step with " + std::to_string(n) +
                              " Gaussians");
   }

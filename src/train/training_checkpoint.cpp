@@ -11,8 +11,8 @@ const char* kGroupNames[kParamGroups] = {"means", "log_scales", "quats", "opacit
 }  // namespace
 
 Checkpoint make_training_checkpoint(const Trainer& trainer, const nlohmann::json& extra_metadata) {
-  auto& t = const_cast<Trainer&>(trainer);  // read-only use of the mutable accessors
-  TrainableGaussians& g = t.mutable_gaussians();
+  const Trainer& t = trainer;
+  const TrainableGaussians& g = t.gaussians();
   Checkpoint c;
   c.metadata = extra_metadata.is_object() ? extra_metadata : nlohmann::json::object();
   c.metadata["step"] = trainer.current_step();
