@@ -11,6 +11,7 @@
 
 #include "desplat/image_io.hpp"
 #include "desplat/raster.hpp"
+#include "desplat/trainer.hpp"
 
 namespace {
 
@@ -18,7 +19,7 @@ using desplat::Camera;
 using desplat::GaussianSet;
 
 constexpr float kShY0 = 0.28209479177387814f;
-constexpr float kEvalBackground[3] = {0.1490f, 0.1647f, 0.2157f};  // REFERENCE.md §4
+const std::array<float, 3> kEvalBackground = desplat::TrainConfig{}.eval_background;  // REFERENCE.md §4
 
 // A checkered floor, a hue-striped sphere and a ring of small glossy Gaussians.
 GaussianSet demo_scene() {
@@ -112,9 +113,7 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       desplat::rasterize_forward(scene.view(), cam, settings, out);
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      desplat::FloatImage img{width, height, 3, out.color};
-      for (size_t p = 0; p < out.alpha.size(); ++p)
-        for (int c = 0; c < 3; ++c) img.pixels[3 * p + c] += (1.0f - out.alpha[p]) * kEvalBackground[c];
+      const desplat::FloatImage img = desplat::composite_over_background(out, kEvalBackground);
       char name[32];
       std::snprintf(name, sizeof name, "view_%02d.png", v);
       desplat::write_image(out_dir / name, img);

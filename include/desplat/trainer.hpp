@@ -115,6 +115,9 @@ class Trainer {
   int64_t prune_nonfinite();
 };
 
+// The image a viewer sees: C + (1 − A)·background, clamped to [0, 1] (REFERENCE.md §4).
+FloatImage composite_over_background(const RasterOutput& render, const std::array<float, 3>& background);
+
 // Camera and image at 1/factor resolution (block average, sizes rounded down).
 Camera downscale_camera(const Camera& c, int factor);
 FloatImage downscale_image(const FloatImage& img, int factor);

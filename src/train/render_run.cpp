@@ -4,7 +4,6 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -13,6 +12,7 @@
 #include "desplat/raster.hpp"
 #include "desplat/scene.hpp"
 #include "desplat/train_config_json.hpp"
+#include "desplat/trainer.hpp"
 #include "desplat/training_checkpoint.hpp"
 
 namespace desplat {
@@ -65,9 +65,7 @@ int run_render(const RenderRunOptions& o) {
   for (size_t i : chosen) {
     const Camera& cam = scene.views[i].camera;
     rasterize_forward(gaussians.view(), cam, rs, out);
-    FloatImage img{cam.width, cam.height, 3, out.color};
-    for (size_t p = 0; p < out.alpha.size(); ++p)
-      for (int c = 0; c < 3; ++c) img.pixels[3 * p + c] += (1.0f - out.alpha[p]) * train.eval_background[c];
+    const FloatImage img = composite_over_background(out, train.eval_background);
     write_image(o.out_dir / fs::path(scene.views[i].name).replace_extension(".png"), img);
   }
   return static_cast<int>(chosen.size());

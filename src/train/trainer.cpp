@@ -34,6 +34,14 @@ GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, 
 
 }  // namespace
 
+FloatImage composite_over_background(const RasterOutput& r, const std::array<float, 3>& background) {
+  FloatImage img{r.width, r.height, 3, std::vector<float>(r.color.size())};
+  for (size_t p = 0; p < r.alpha.size(); ++p)
+    for (int c = 0; c < 3; ++c)
+      img.pixels[3 * p + c] = std::clamp(r.color[3 * p + c] + (1.0f - r.alpha[p]) * background[c], 0.0f, 1.0f);
+  return img;
+}
+
 Camera downscale_camera(const Camera& c, int factor) {
   Camera out = c;
   out.fx /= factor, out.fy /= factor, out.cx /= factor, out.cy /= factor;
@@ -186,11 +194,7 @@ FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& bac
   rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
   RasterOutput out;
   rasterize_forward(gaussians_.params.view(), camera, rs, out);
-  FloatImage img{camera.width, camera.height, 3, std::vector<float>(out.color.size())};
-  for (size_t p = 0; p < out.alpha.size(); ++p)
-    for (int c = 0; c < 3; ++c)
-      img.pixels[3 * p + c] = std::clamp(out.color[3 * p + c] + (1.0f - out.alpha[p]) * background[c], 0.0f, 1.0f);
-  return img;
+  return composite_over_background(out, background);
 }
 
 std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
