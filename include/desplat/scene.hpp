@@ -5,6 +5,9 @@
 //   <data_dir>/images/<name>       the photos, named as in the model (any format OpenImageIO reads)
 //   <data_dir>/images_<N>/<name>   optional, the same photos downscaled N times
 //   <data_dir>/sparse/0/           the COLMAP model, binary or text (colmap.hpp)
+//   <data_dir>/distractor_masks/<name with its extension replaced by .png>
+//                                  optional ground-truth distractor masks (masks.hpp); a view
+//                                  without such a file (or a scene without the folder) has none
 // The input is only read, never written (it may be read-only, like /work/shared).
 //
 // Frames and units:
@@ -83,6 +86,8 @@ struct SceneView {
   colmap::Camera distorted_camera;     // the photo's lens at the training size
   colmap::Camera undistorted_camera;   // PINHOLE, training size (camera's intrinsics in double)
   int source_width = 0, source_height = 0;  // size of the pixels in image_path
+  int photo_width = 0, photo_height = 0;    // the COLMAP camera's size: the photo in images/
+  std::filesystem::path mask_path;     // ground-truth distractor mask; empty when there is none
 };
 
 struct Scene {

@@ -15,6 +15,7 @@
 #include <optional>
 
 #include "desplat/camera_models.hpp"
+#include "desplat/masks.hpp"
 
 namespace desplat {
 namespace {
@@ -285,6 +286,13 @@ void add_points(const colmap::Model& model, const fs::path& sparse, const SceneO
          sparse.string() + ": the model has no 3D points; training will start from random points");
 }
 
+// The view's ground-truth distractor mask (masks.hpp), or empty when the file does not exist.
+fs::path existing_mask(const fs::path& data, const std::string& image_name) {
+  const fs::path mask = distractor_mask_path(data, image_name);
+  std::error_code ec;
+  return fs::is_regular_file(mask, ec) ? mask : fs::path();
+}
+
 }  // namespace
 
 std::vector<size_t> Scene::train_views() const {
@@ -353,6 +361,9 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     v.colmap_image_id = image.id;
     v.source_width = src.width;
     v.source_height = src.height;
+    v.photo_width = int(lens.width);
+    v.photo_height = int(lens.height);
+    v.mask_path = existing_mask(data, image.name);
     v.distorted_camera = w == lens.width && h == lens.height ? lens : rescale_camera(lens, w, h);
     try {
       v.undistorted_camera = undistort_camera(v.distorted_camera, options.undistort);

@@ -1,0 +1,80 @@
+// Lens and camera poses of the synthetic views.
+#include "synth/camera_path.hpp"
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <numbers>
+
+#include "synth/random.hpp"
+
+namespace desplat::synth {
+
+using Eigen::Vector3d;
+
+colmap::Camera make_lens(const CameraSpec& spec) {
+  colmap::Camera cam;
+  cam.id = 1;
+  cam.width = static_cast<uint64_t>(spec.width);
+  cam.height = static_cast<uint64_t>(spec.height);
+  const double f = 0.5 * spec.width / std::tan(spec.fov_x_deg * std::numbers::pi / 360);
+  const double cx = 0.5 * spec.width + spec.principal_offset_px[0];
+  const double cy = 0.5 * spec.height + spec.principal_offset_px[1];
+  cam.params = {f, f, cx, cy};
+  if (spec.model == "OPENCV") {
+    cam.model = colmap::CameraModelId::OpenCV;
+    cam.params.insert(cam.params.end(), spec.distortion.begin(), spec.distortion.end());
+  } else {
+    cam.model = colmap::CameraModelId::Pinhole;
+  }
+  return cam;
+}
+
+ViewPose look_at(const Vector3d& center, const Vector3d& target) {
+  const Vector3d forward = (target - center).normalized();
+  // Looking straight up or down: any horizontal "right" will do.
+  const Vector3d up = std::abs(forward.z()) > 0.999 ? Vector3d::UnitY() : Vector3d::UnitZ();
+  const Vector3d right = forward.cross(up).normalized();
+  const Vector3d down = forward.cross(right);
+  ViewPose pose;
+  pose.R_cw.row(0) = right.transpose();
+  pose.R_cw.row(1) = down.transpose();
+  pose.R_cw.row(2) = forward.transpose();
+  pose.center = center;
+  pose.t_cw = -pose.R_cw * center;
+  return pose;
+}
+
+std::vector<ViewPose> camera_path(const ViewsSpec& v, uint64_t seed) {
+  const Vector3d target(v.target[0], v.target[1], v.target[2]);
+  const double deg = std::numbers::pi / 180;
+  const int n = v.count;
+  std::vector<ViewPose> poses;
+  // The forward path's frame: its centre, and the directions across the view at that centre.
+  const Vector3d heading(std::cos(v.start_deg * deg), std::sin(v.start_deg * deg), 0);
+  const Vector3d path_centre = target + v.radius * heading + Vector3d(0, 0, v.height);
+  const ViewPose centre_pose = look_at(path_centre, target);
+  for (int k = 0; k < n; ++k) {
+    Vector3d c;
+    if (v.path == "orbit") {
+      // A closed circle does not repeat its first camera; an open arc ends on its last.
+      const double step = v.arc_deg >= 360 ? v.arc_deg / n : v.arc_deg / std::max(1, n - 1);
+      const double a = (v.start_deg + step * k) * deg;
+      c = target + Vector3d(v.radius * std::cos(a), v.radius * std::sin(a), v.height);
+    } else {
+      // Two turns of a widening spiral across the view (as LLFF captures), no position repeated.
+      const double s = n > 1 ? static_cast<double>(k) / (n - 1) : 0;
+      const double theta = 4 * std::numbers::pi * s;
+      const double r = 0.4 + 0.6 * s;
+      c = path_centre + r * v.spread[0] * std::cos(theta) * centre_pose.R_cw.row(0).transpose() -
+          r * v.spread[1] * std::sin(theta) * centre_pose.R_cw.row(1).transpose();
+    }
+    if (v.position_jitter > 0) {
+      Rng rng(seed, Stream::Camera, static_cast<uint64_t>(k));
+      for (int a = 0; a < 3; ++a) c[a] += rng.uniform(-v.position_jitter, v.position_jitter);
+    }
+    poses.push_back(look_at(c, target));
+  }
+  return poses;
+}
+
+}  // namespace desplat::synth

@@ -1,0 +1,30 @@
+// Where the synthetic views are: the lens (a COLMAP camera) and one pose per view along an
+// orbit or a forward-facing spiral, every camera looking at ViewsSpec::target.
+// Frames as synth.hpp: world z up; poses world-to-camera in COLMAP's convention.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "desplat/colmap.hpp"
+#include "desplat/synth.hpp"
+
+namespace desplat::synth {
+
+struct ViewPose {
+  Eigen::Matrix3d R_cw;   // world-to-camera rotation: rows are the camera's x (right),
+                          // y (down) and z (viewing direction) in world coordinates
+  Eigen::Vector3d t_cw;   // world-to-camera translation: p_cam = R_cw·p + t_cw
+  Eigen::Vector3d center;  // camera center in world coordinates
+};
+
+// PINHOLE (fx, fy, cx, cy) or OPENCV (… k1, k2, p1, p2) with id 1, fx = fy from the field of view.
+colmap::Camera make_lens(const CameraSpec& spec);
+
+// The pose looking from `center` at `target` with world z as "up" in the image.
+ViewPose look_at(const Eigen::Vector3d& center, const Eigen::Vector3d& target);
+
+// views.count poses in view order (deterministic in `seed` when position_jitter > 0).
+std::vector<ViewPose> camera_path(const ViewsSpec& views, uint64_t seed);
+
+}  // namespace desplat::synth
