@@ -17,7 +17,8 @@ int main(int argc, char** argv) {
       "Train a 3D Gaussian Splatting model on the CPU.\n"
       "Input: --data DIR with images/ and sparse/0/ (a COLMAP model), or --images DIR with photos only\n"
       "(COLMAP then reconstructs the cameras). Outputs go to --out (see README: config.json,\n"
-      "checkpoint.ckpt, metrics.json, renders/test/, point_cloud.ply). Ctrl-C writes a checkpoint\n"
+      "checkpoint.ckpt, metrics.json, renders/test/, renders/train/, point_cloud.ply). Ctrl-C writes a\n"
+      "checkpoint\n"
       "and exits; --resume continues from it."};
   desplat::TrainingRunOptions o;
   auto* data = app.add_option("--data", o.data_dir, "scene folder with images/ and sparse/0/");
@@ -30,7 +31,13 @@ int main(int argc, char** argv) {
   app.add_option("--seed", o.seed, "random seed (default 0)");
   app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(CLI::NonNegativeNumber);
   app.add_flag("--static-only", o.static_only,
-               "static Gaussians only (the Splatfacto baseline; currently the only mode)");
+               "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
+  app.add_option("--distractors-per-view", o.distractors_per_view,
+                 "initial distractor Gaussians per training view (default 1000)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--no-distractor-density", o.no_distractor_density,
+               "ablation: never split/duplicate/cull distractors");
+  app.add_flag("--no-regularization", o.no_regularization, "ablation: drop the two opacity regularizers");
   app.add_flag("--resume", o.resume, "continue from --out/checkpoint.ckpt");
   app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
       ->check(CLI::PositiveNumber)->capture_default_str();

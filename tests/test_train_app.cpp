@@ -73,10 +73,36 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
     ++compared;
   }
   EXPECT_EQ(compared, 2);  // 16 views, every 8th held out
+  // DeSplat is the default: every training view has a Fig. 2 row and its layers can be rendered.
+  EXPECT_EQ(metrics["mode"], "desplat");
+  EXPECT_EQ(metrics["cost"]["views_with_distractors"], 14);  // no refinement before step 500
+  EXPECT_TRUE(fs::exists(out / "renders" / "train" / "view_1.png"));
+  const fs::path layers = root_ / "layers";
+  const Outcome lr = run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " + layers.string() +
+                         " --layer distractor --views train --mask --alpha");
+  ASSERT_EQ(lr.exit_code, 0) << lr.output;
+  EXPECT_TRUE(fs::exists(layers / "view_1.png"));
+  EXPECT_TRUE(fs::exists(layers / "view_1_mask.png"));
+  EXPECT_FALSE(fs::exists(layers / "view_0.png"));  // a test view
+  // Test views have no distractors: asking for that layer there is one clear error.
   const Outcome bad_layer = run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " +
-                            renders.string() + " --layer distractor");
+                                renders.string() + " --layer distractor");
   EXPECT_EQ(bad_layer.exit_code, 1);
-  EXPECT_NE(bad_layer.output.find("static Gaussians only"), std::string::npos) << bad_layer.output;
+  EXPECT_NE(bad_layer.output.find("view 'view_0.png' is not a training view"), std::string::npos) << bad_layer.output;
+}
+
+TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {
+  const fs::path out = root_ / "static_only";
+  const Outcome r = run(train() + " --out " + out.string() + " --iterations 30 --threads 2 --static-only");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json metrics;
+  std::ifstream(out / "metrics.json") >> metrics;
+  EXPECT_EQ(metrics["mode"], "static-only");
+  EXPECT_EQ(metrics["cost"]["distractor_gaussians"], 0);
+  const Outcome bad = run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " +
+                          (root_ / "so_renders").string() + " --views train --mask");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.output.find("--mask needs a DeSplat model"), std::string::npos) << bad.output;
 }
 
 TEST_F(TrainApp, InterruptWritesCheckpointAndResumeFinishes) {

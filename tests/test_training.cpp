@@ -23,6 +23,7 @@ TrainConfig short_config(int64_t iterations) {
   // training background would make that flat color content to be painted with opaque
   // Gaussians (real captures have no empty background, so training keeps it on).
   c.random_background = false;
+  c.distractors.enabled = false;  // the static Splatfacto baseline; DeSplat: test_distractors.cpp
   return c;
 }
 

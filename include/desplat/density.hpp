@@ -38,6 +38,13 @@ struct RefineReport {
 RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
                               int num_train_views, std::mt19937_64& rng);
 
+// One refinement regardless of the schedule: densify (split/duplicate) when `densify`,
+// then cull (opacity, and the scale/screen-size rules by `step`); with `cull_unseen`
+// also every Gaussian not seen since the last refinement (zero max screen radius: the
+// per-view distractor rule of REFERENCE.md §7). No opacity reset. Clears the statistics.
+RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
+                                   bool densify, bool cull_unseen, std::mt19937_64& rng);
+
 // Gaussian-wise pieces, exposed for tests.
 GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask, int samples, float scale_factor,
                           std::mt19937_64& rng);

@@ -10,13 +10,21 @@ namespace desplat {
 struct RenderRunOptions {
   std::filesystem::path model_dir;  // desplat_train's --out (config.json + checkpoint.ckpt)
   std::filesystem::path out_dir;    // one PNG per view
-  std::string layer = "static";     // static | distractor | composite (the latter need DeSplat models)
+  // static | distractor | composite. The last two exist only for training views of a
+  // DeSplat model (each training view has its own distractors); test and novel views
+  // have the static layer only. Layers are shown over the evaluation background.
+  std::string layer = "static";
   std::string views = "test";       // test | train | all | comma-separated image names
+  bool mask = false;    // also <name>_mask.png: the distractor mask A_d > 0.5 (training views)
+  bool alpha = false;   // write the layer as straight RGBA (alpha = the layer's coverage)
+  bool figure = false;  // also <name>_row.png: truth | static | distractor | composite | mask
   int threads = 0;
 };
 
-// Returns the number of images written. Throws with a clear message for bad input
-// (missing model files, unknown view names, a layer the model does not have).
+// Writes <out_dir>/<image name>.png per view (plus the extras asked for) and returns the
+// number of files written. Throws with a clear message for bad input (missing model
+// files, unknown view names, a layer, mask or figure asked of a view that has no
+// distractors or of a static-only model).
 int run_render(const RenderRunOptions& options);
 
 }  // namespace desplat

@@ -1,4 +1,6 @@
-// Static 3DGS training on the CPU (the Splatfacto baseline, REFERENCE.md §4–7).
+// DeSplat training on the CPU (REFERENCE.md §4–7): static Gaussians shared by all views
+// plus, per training view, distractor Gaussians only that view renders; with
+// config.distractors.enabled = false it is the static Splatfacto baseline.
 //
 // All geometry is in the normalized world frame (§1). Training images are float RGB
 // [H, W, 3] at the full training resolution; the resolution schedule derives the
@@ -13,7 +15,9 @@
 #include <vector>
 
 #include "desplat/camera.hpp"
+#include "desplat/composite.hpp"
 #include "desplat/density.hpp"
+#include "desplat/distractors.hpp"
 #include "desplat/image_io.hpp"
 #include "desplat/raster.hpp"
 #include "desplat/trainable.hpp"
@@ -45,6 +49,7 @@ struct TrainConfig {
   int64_t means_lr_decay_steps = 30000;  // … over this many steps, whatever `iterations` is (Splatfacto)
   LearningRates lr;
   DensifySettings densify;
+  DistractorSettings distractors;
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
   int random_init_points = 50000;  // used when the scene has no points
@@ -53,15 +58,21 @@ struct TrainConfig {
   int threads = 0;                 // 0: all cores
 };
 
+// Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
+// work of the view's distractor branch (its forward, backward, Adam and refinement);
+// `loss` includes the compositing and its gradient.
 struct StepTimings {
-  double forward = 0, backward = 0, loss = 0, optimizer = 0;  // seconds
+  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0;
+  double total() const { return forward + backward + loss + optimizer + distractor; }
 };
 
 struct StepStats {
   int64_t step = 0;
   double loss = 0, psnr = 0;
-  size_t gaussians = 0;
+  size_t gaussians = 0;             // static
+  size_t view_distractors = 0;      // distractors of this step's view
   RefineReport refine;
+  RefineReport distractor_refine;   // summed over views when they were refined this step
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
 };
@@ -79,13 +90,20 @@ class Trainer {
   StepStats step();
   int64_t current_step() const { return step_; }
   const TrainConfig& config() const { return config_; }
+  const TrainingData& data() const { return data_; }
   const TrainableGaussians& gaussians() const { return gaussians_; }
   TrainableGaussians& mutable_gaussians() { return gaussians_; }  // tests and checkpoints
+  // Per training view (data.train order); empty when distractors are disabled.
+  const std::vector<TrainableGaussians>& distractors() const { return distractors_; }
+  std::vector<TrainableGaussians>& mutable_distractors() { return distractors_; }
+  size_t distractor_count() const;  // over all views
   std::mt19937_64& rng() { return rng_; }
   const std::mt19937_64& rng() const { return rng_; }
 
   // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped).
   FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;
+  // Every layer of training view `train_view` at its full training resolution.
+  ViewLayers render_layers(size_t train_view, const std::array<float, 3>& background) const;
   // PSNR/SSIM of every view's render over the evaluation background.
   std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
 
@@ -101,22 +119,22 @@ class Trainer {
   const TrainingData& data_;
   TrainConfig config_;
   TrainableGaussians gaussians_;
+  std::vector<TrainableGaussians> distractors_;
   std::mt19937_64 rng_;
   int64_t step_ = 0;
   // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
   std::vector<std::vector<FloatImage>> downscaled_;
   // Scratch reused every step.
-  RasterOutput forward_;
-  RasterGradients grads_;
-  std::vector<float> composite_, d_color_, d_alpha_;
+  RasterOutput forward_, distractor_forward_;
+  RasterGradients grads_, distractor_grads_;
+  std::vector<float> composite_, d_composite_, d_color_, d_alpha_, d_distractor_color_, d_distractor_alpha_;
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
-  int64_t prune_nonfinite();
+  int64_t prune_nonfinite(TrainableGaussians& g, const std::string& what);
+  RefineReport refine_all_distractors(int image_size);
+  RasterSettings raster_settings() const;
 };
-
-// The image a viewer sees: C + (1 − A)·background, clamped to [0, 1] (REFERENCE.md §4).
-FloatImage composite_over_background(const RasterOutput& render, const std::array<float, 3>& background);
 
 // Camera and image at 1/factor resolution (block average, sizes rounded down).
 Camera downscale_camera(const Camera& c, int factor);

@@ -5,8 +5,11 @@
 //   config.json          effective training configuration + run options
 //   checkpoint.ckpt      latest checkpoint (atomic; --resume continues from it)
 //   metrics.json         test-view PSNR/SSIM per image and mean, evaluation history,
-//                        Gaussian count, timings (median per step at full resolution)
+//                        Gaussian counts and MB (static, distractor), timings (median per
+//                        step at full resolution, distractor branch separately)
 //   renders/test/*.png   ground truth | render, side by side, per test view
+//   renders/train/*.png  DeSplat only: truth | static | distractor | composite | mask per
+//                        training view (the paper's Fig. 2)
 //   point_cloud.ply      static Gaussians as a standard 3DGS PLY, original COLMAP frame
 #pragma once
 
@@ -28,7 +31,12 @@ struct TrainingRunOptions {
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
   std::optional<int> threads;
-  bool static_only = false;  // the baseline; DeSplat's distractors arrive in a later issue
+  bool static_only = false;  // the Splatfacto baseline: no distractors
+  // Ablation switches (override the config file): distractors.initial_count,
+  // distractors.density_control = false, distractors.regularize = false.
+  std::optional<int> distractors_per_view;
+  bool no_distractor_density = false;
+  bool no_regularization = false;
   bool resume = false;
   int downscale = 1;
   SplitOptions split;

@@ -71,12 +71,32 @@ GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask
 
 RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
                               int num_train_views, std::mt19937_64& rng) {
-  RefineReport report;
-  if (!s.enabled || step <= s.warmup || step % s.refine_every != 0) return report;
-  report.ran = true;
+  if (!s.enabled || step <= s.warmup || step % s.refine_every != 0) return {};
   const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
   const bool densify = step < s.stop_split_at && step % reset_interval > num_train_views + s.refine_every;
+  RefineReport report = apply_density_control(g, s, step, image_size, densify, false, rng);
+  if (step < s.stop_split_at && step % reset_interval == s.refine_every) {
+    const float cap = logit(2.0f * s.cull_alpha);
+    const int opacity = int(ParamGroup::OpacityLogits);
+    for (size_t i = 0; i < g.size(); ++i) {
+      g.params.opacity_logits[i] = std::min(g.params.opacity_logits[i], cap);
+      g.adam_m[opacity][i] = g.adam_v[opacity][i] = 0.0f;
+    }
+    report.opacity_reset = true;
+  }
+  return report;
+}
+
+RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
+                                   bool densify, bool cull_unseen, std::mt19937_64& rng) {
+  RefineReport report;
+  report.ran = true;
+  const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
   const size_t n = g.size();
+  // Rows [0, n) are the Gaussians the statistics describe; densification appends after them.
+  std::vector<uint8_t> unseen(n, 0);
+  if (cull_unseen)
+    for (size_t i = 0; i < n; ++i) unseen[i] = g.max_screen_radius[i] == 0.0f;
   std::vector<uint8_t> remove(n, 0);
 
   if (densify) {
@@ -112,7 +132,7 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
   // Cull (also after densification has stopped).
   const float min_logit = logit(s.cull_alpha);
   for (size_t i = 0; i < g.size(); ++i) {
-    bool cull = g.params.opacity_logits[i] < min_logit;
+    bool cull = g.params.opacity_logits[i] < min_logit || (i < n && unseen[i]);
     if (step > reset_interval) {
       cull = cull || max_scale(g.params, i) > s.cull_scale;
       if (step < s.stop_screen_size_at) cull = cull || g.max_screen_radius[i] > s.cull_screen_size;
@@ -123,16 +143,6 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
   std::vector<uint8_t> keep(g.size());
   for (size_t i = 0; i < keep.size(); ++i) keep[i] = !remove[i];
   g.keep(keep);
-
-  if (step < s.stop_split_at && step % reset_interval == s.refine_every) {
-    const float cap = logit(2.0f * s.cull_alpha);
-    const int opacity = int(ParamGroup::OpacityLogits);
-    for (size_t i = 0; i < g.size(); ++i) {
-      g.params.opacity_logits[i] = std::min(g.params.opacity_logits[i], cap);
-      g.adam_m[opacity][i] = g.adam_v[opacity][i] = 0.0f;
-    }
-    report.opacity_reset = true;
-  }
   g.reset_statistics();
   return report;
 }

@@ -1,1 +1,62 @@
-// placeholder
+// Initialization and per-view density control of distractor Gaussians.
+#include "desplat/distractors.hpp"
+
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+#include "desplat/init.hpp"
+
+namespace desplat {
+
+GaussianSet init_distractors(const Camera& cam, const DistractorSettings& s, uint64_t seed) {
+  if (s.initial_count < 0) throw std::invalid_argument("distractors: initial_count must be ≥ 0");
+  if (!(s.init_depth > 0) || !(s.init_half_width > 0) || !(s.init_opacity > 0 && s.init_opacity < 1))
+    throw std::invalid_argument("distractors: init_depth and init_half_width must be > 0, init_opacity in (0, 1)");
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> plane(-s.init_half_width, s.init_half_width), unit(0.0f, 1.0f);
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  const size_t n = size_t(s.initial_count);
+  std::vector<std::array<float, 3>> world(n);
+  for (size_t i = 0; i < n; ++i) {
+    const double pc[3] = {plane(rng), plane(rng), s.init_depth};
+    // x_world = Rᵀ (x_cam − t), with R row-major world→camera.
+    for (int k = 0; k < 3; ++k) {
+      double v = 0;
+      for (int r = 0; r < 3; ++r) v += cam.R_cw[3 * r + k] * (pc[r] - cam.t_cw[r]);
+      world[i][k] = float(v);
+    }
+  }
+  GaussianSet g;
+  g.color_mode = ColorMode::RGB;
+  g.resize(n);
+  const std::vector<float> dist = mean_knn_distance(world, 3);
+  const float opacity_logit = std::log(s.init_opacity / (1 - s.init_opacity));
+  for (size_t i = 0; i < n; ++i) {
+    const float log_scale = std::log(std::max(dist[i], 1e-7f));
+    float q[4], n2 = 0;
+    do {  // a normalized 4D Gaussian sample is a uniformly random unit quaternion
+      n2 = 0;
+      for (float& v : q) v = normal(rng), n2 += v * v;
+    } while (n2 < 1e-12f);
+    for (int k = 0; k < 3; ++k) g.means[3 * i + k] = world[i][k], g.log_scales[3 * i + k] = log_scale;
+    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k] / std::sqrt(n2);
+    g.opacity_logits[i] = opacity_logit;
+    for (int c = 0; c < 3; ++c) g.colors[3 * i + c] = unit(rng);
+  }
+  return g;
+}
+
+bool distractor_refine_due(int64_t step, int num_train_views, const DensifySettings& d, const DistractorSettings& s) {
+  if (!s.enabled || !s.density_control || !d.enabled) return false;
+  if (step <= d.warmup || step % d.refine_every != 0) return false;
+  const int64_t period = int64_t(s.refine_every_epochs) * std::max(1, num_train_views);
+  return step % period < d.refine_every;
+}
+
+RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d, int64_t step, int image_size,
+                                std::mt19937_64& rng) {
+  return apply_density_control(g, d, step, image_size, step < d.stop_split_at, /*cull_unseen=*/true, rng);
+}
+
+}  // namespace desplat

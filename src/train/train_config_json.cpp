@@ -45,6 +45,21 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.cull_alpha", &c.densify.cull_alpha},
       {"densify.cull_scale", &c.densify.cull_scale},
       {"densify.cull_screen_size", &c.densify.cull_screen_size},
+      {"distractors.enabled", &c.distractors.enabled},
+      {"distractors.initial_count", &c.distractors.initial_count},
+      {"distractors.init_depth", &c.distractors.init_depth},
+      {"distractors.init_half_width", &c.distractors.init_half_width},
+      {"distractors.init_opacity", &c.distractors.init_opacity},
+      {"distractors.lr.means", &c.distractors.lr.means},
+      {"distractors.lr.log_scales", &c.distractors.lr.log_scales},
+      {"distractors.lr.quats", &c.distractors.lr.quats},
+      {"distractors.lr.opacity_logits", &c.distractors.lr.opacity_logits},
+      {"distractors.lr.rgb", &c.distractors.lr.colors_dc},
+      {"distractors.density_control", &c.distractors.density_control},
+      {"distractors.refine_every_epochs", &c.distractors.refine_every_epochs},
+      {"distractors.regularize", &c.distractors.regularize},
+      {"distractors.lambda_static", &c.distractors.lambda_static},
+      {"distractors.lambda_distractor", &c.distractors.lambda_distractor},
       {"random_background", &c.random_background},
       {"eval_background", &c.eval_background},
       {"random_init_points", &c.random_init_points},
@@ -99,6 +114,11 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
   }
   if (base.iterations < 1) throw std::invalid_argument("config: iterations must be at least 1");
   if (base.sh_degree < 0 || base.sh_degree > 3) throw std::invalid_argument("config: sh_degree must be 0..3");
+  if (base.distractors.initial_count < 0) throw std::invalid_argument("config: distractors.initial_count must be ≥ 0");
+  if (base.distractors.refine_every_epochs < 1)
+    throw std::invalid_argument("config: distractors.refine_every_epochs must be at least 1");
+  if (!(base.distractors.lambda_static >= 0) || !(base.distractors.lambda_distractor >= 0))
+    throw std::invalid_argument("config: distractors.lambda_static and lambda_distractor must be ≥ 0");
   return base;
 }
 

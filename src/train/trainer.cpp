@@ -1,5 +1,7 @@
-// The training loop: one view per step, static render over a random background,
-// photometric loss, backward, Adam, density control (REFERENCE.md §4–7).
+// The training loop: one view per step; the static and the view's distractor layer are
+// rendered separately and composited over a random background; photometric loss plus
+// the opacity regularizers; backward through the composite into both; Adam; density
+// control (REFERENCE.md §4–7).
 #include "desplat/trainer.hpp"
 
 #include <algorithm>
@@ -34,14 +36,6 @@ GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, 
 
 }  // namespace
 
-FloatImage composite_over_background(const RasterOutput& r, const std::array<float, 3>& background) {
-  FloatImage img{r.width, r.height, 3, std::vector<float>(r.color.size())};
-  for (size_t p = 0; p < r.alpha.size(); ++p)
-    for (int c = 0; c < 3; ++c)
-      img.pixels[3 * p + c] = std::clamp(r.color[3 * p + c] + (1.0f - r.alpha[p]) * background[c], 0.0f, 1.0f);
-  return img;
-}
-
 Camera downscale_camera(const Camera& c, int factor) {
   Camera out = c;
   out.fx /= factor, out.fy /= factor, out.cx /= factor, out.cy /= factor;
@@ -75,8 +69,25 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
   gaussians_ = TrainableGaussians(initial_gaussians(data_, config_, rng_));
+  if (config_.distractors.enabled) {
+    distractors_.reserve(data_.train.size());
+    for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
+  }
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
+}
+
+size_t Trainer::distractor_count() const {
+  size_t n = 0;
+  for (const TrainableGaussians& d : distractors_) n += d.size();
+  return n;
+}
+
+RasterSettings Trainer::raster_settings() const {
+  RasterSettings rs;
+  rs.num_threads = config_.threads;
+  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
+  return rs;
 }
 
 int Trainer::next_view() {
@@ -107,43 +118,57 @@ StepStats Trainer::step() {
   const Camera cam = downscale_camera(data_.train[view].camera, factor);
   const FloatImage& target = target_at(view, factor);
   const size_t pixels = size_t(cam.width) * cam.height;
-
-  RasterSettings rs;
-  rs.num_threads = config_.threads;
-  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
+  const RasterSettings rs = raster_settings();
   std::array<float, 3> bg = config_.eval_background;
   if (config_.random_background) {
     std::uniform_real_distribution<float> u(0.0f, 1.0f);
     bg = {u(rng_), u(rng_), u(rng_)};
   }
+  // A view whose distractors were all culled has no second pass at all.
+  TrainableGaussians* distractors = nullptr;
+  if (config_.distractors.enabled && distractors_[view].size() > 0) distractors = &distractors_[view];
+  stats.view_distractors = distractors ? distractors->size() : 0;
 
   auto t0 = Clock::now();
   rasterize_forward(gaussians_.params.view(), cam, rs, forward_);
-  composite_.resize(3 * pixels);
-  for (size_t p = 0; p < pixels; ++p)
-    for (int c = 0; c < 3; ++c)
-      composite_[3 * p + c] = std::clamp(forward_.color[3 * p + c] + (1.0f - forward_.alpha[p]) * bg[c], 0.0f, 1.0f);
   stats.timings.forward = seconds_since(t0);
+  if (distractors) {
+    t0 = Clock::now();
+    rasterize_forward(distractors->params.view(), cam, rs, distractor_forward_);
+    stats.timings.distractor += seconds_since(t0);
+  }
 
   t0 = Clock::now();
-  d_color_.resize(3 * pixels);
+  const Layer static_layer{forward_.color, forward_.alpha};
+  const Layer distractor_layer =
+      distractors ? Layer{distractor_forward_.color, distractor_forward_.alpha} : Layer{};
+  composite_.resize(3 * pixels);
+  composite_layers(static_layer, distractor_layer, bg, composite_);
+  d_composite_.resize(3 * pixels);
   const PhotometricLoss loss =
-      photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_color_);
-  // Through the clamp and C = C_s + (1 − A)·bg: ∂/∂C_s = ∂/∂C, ∂/∂A = −Σ_c ∂/∂C_c · bg_c.
-  d_alpha_.assign(pixels, 0.0f);
-  for (size_t p = 0; p < pixels; ++p)
-    for (int c = 0; c < 3; ++c) {
-      const float raw = forward_.color[3 * p + c] + (1.0f - forward_.alpha[p]) * bg[c];
-      if (raw < 0.0f || raw > 1.0f) d_color_[3 * p + c] = 0.0f;
-      d_alpha_[p] -= d_color_[3 * p + c] * bg[c];
-    }
+      photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_);
+  d_color_.resize(3 * pixels);
+  d_alpha_.resize(pixels);
+  d_distractor_color_.resize(distractors ? 3 * pixels : 0);
+  d_distractor_alpha_.resize(distractors ? pixels : 0);
+  composite_layers_backward(static_layer, distractor_layer, bg, d_composite_,
+                            {d_color_, d_alpha_, d_distractor_color_, d_distractor_alpha_});
   stats.loss = loss.loss;
+  if (config_.distractors.enabled && config_.distractors.regularize)
+    stats.loss += alpha_regularizers(static_layer, distractor_layer, config_.distractors.lambda_static,
+                                     config_.distractors.lambda_distractor, d_alpha_, d_distractor_alpha_);
   stats.psnr = psnr(composite_, target.pixels);
   stats.timings.loss = seconds_since(t0);
 
   t0 = Clock::now();
   rasterize_backward(gaussians_.params.view(), cam, rs, forward_, d_color_, d_alpha_, {}, grads_);
   stats.timings.backward = seconds_since(t0);
+  if (distractors) {
+    t0 = Clock::now();
+    rasterize_backward(distractors->params.view(), cam, rs, distractor_forward_, d_distractor_color_,
+                       d_distractor_alpha_, {}, distractor_grads_);
+    stats.timings.distractor += seconds_since(t0);
+  }
 
   t0 = Clock::now();
   if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(forward_, grads_);
@@ -151,50 +176,82 @@ StepStats Trainer::step() {
   // Exponential decay of the means' rate from lr.means to means_lr_final.
   const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
+  const double decay = double(lr.means) / double(config_.lr.means);  // the distractors' means follow it
   gaussians_.adam_update(grads_, lr, AdamSettings{});
-  stats.nonfinite_pruned = prune_nonfinite();
-  stats.refine = refine_gaussians(gaussians_, config_.densify, step_, std::max(cam.width, cam.height),
+  stats.nonfinite_pruned = prune_nonfinite(gaussians_, "static Gaussian");
+  const int image_size = std::max(cam.width, cam.height);
+  stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                   static_cast<int>(data_.train.size()), rng_);
   stats.timings.optimizer = seconds_since(t0);
+
+  const bool refine_distractors_now =
+      distractor_refine_due(step_, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
+  if (distractors || refine_distractors_now) {
+    t0 = Clock::now();
+    if (distractors) {
+      // Distractor statistics are kept after densification stops: culling unseen ones needs them.
+      distractors->accumulate_statistics(distractor_forward_, distractor_grads_);
+      LearningRates dlr = config_.distractors.lr;
+      dlr.means = float(dlr.means * decay);
+      distractors->adam_update(distractor_grads_, dlr, AdamSettings{});
+      stats.nonfinite_pruned += prune_nonfinite(*distractors, "distractor of view " + data_.train[view].name);
+    }
+    if (refine_distractors_now) stats.distractor_refine = refine_all_distractors(image_size);
+    stats.timings.distractor += seconds_since(t0);
+  }
   stats.gaussians = gaussians_.size();
   ++step_;
   return stats;
 }
 
+RefineReport Trainer::refine_all_distractors(int image_size) {
+  RefineReport total;
+  total.ran = true;
+  for (TrainableGaussians& d : distractors_) {
+    if (d.size() == 0) continue;
+    const RefineReport r = refine_distractors(d, config_.densify, step_, image_size, rng_);
+    total.split += r.split, total.duplicated += r.duplicated, total.culled += r.culled;
+    // An emptied view gives its memory back; it is never rendered again.
+    if (d.size() == 0) d = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+  }
+  return total;
+}
+
 // A Gaussian whose parameter or Adam moment is not finite is removed before it can
 // spread NaN through the blending of its neighbours.
-int64_t Trainer::prune_nonfinite() {
-  const size_t n = gaussians_.size();
+int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::string& what) {
+  const size_t n = gs.size();
   std::vector<uint8_t> keep(n, 1);
   int64_t bad = 0;
   for (int g = 0; g < kParamGroups; ++g) {
     const ParamGroup group = ParamGroup(g);
-    const int stride = gaussians_.floats_per_gaussian(group);
-    const std::vector<float>& p = gaussians_.param(group);
+    const int stride = gs.floats_per_gaussian(group);
+    const std::vector<float>& p = gs.param(group);
     for (size_t i = 0; i < n; ++i)
       for (int k = 0; k < stride; ++k) {
         const size_t j = i * stride + k;
-        if (std::isfinite(p[j]) && std::isfinite(gaussians_.adam_m[g][j]) && std::isfinite(gaussians_.adam_v[g][j]))
-          continue;
+        if (std::isfinite(p[j]) && std::isfinite(gs.adam_m[g][j]) && std::isfinite(gs.adam_v[g][j])) continue;
         if (keep[i]) {
           ++bad;
-          warn("step " + std::to_string(step_) + ": Gaussian " + std::to_string(i) +
+          warn("step " + std::to_string(step_) + ": " + what + " " + std::to_string(i) +
                " has a non-finite parameter or optimizer moment (group " + std::to_string(g) + "); pruned");
         }
         keep[i] = 0;
       }
   }
-  if (bad > 0) gaussians_.keep(keep);
+  if (bad > 0) gs.keep(keep);
   return bad;
 }
 
 FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background) const {
-  RasterSettings rs;
-  rs.num_threads = config_.threads;
-  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
   RasterOutput out;
-  rasterize_forward(gaussians_.params.view(), camera, rs, out);
+  rasterize_forward(gaussians_.params.view(), camera, raster_settings(), out);
   return composite_over_background(out, background);
+}
+
+ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>& background) const {
+  const GaussianSet* d = distractors_.empty() ? nullptr : &distractors_.at(train_view).params;
+  return render_view_layers(gaussians_.params, d, data_.train.at(train_view).camera, raster_settings(), background);
 }
 
 std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {

@@ -1,51 +1,99 @@
-// Names of the checkpoint arrays: "static/<group>", "static/adam_m/<group>",
-// "static/adam_v/<group>", "static/stats/<name>", "trainer/view_order".
+// Names of the checkpoint arrays, for a prefix P = "static" or "distractor/<train view index>":
+// "P/<group>", "P/adam_m/<group>", "P/adam_v/<group>", "P/stats/<name>"; and
+// "trainer/view_order". Per-set scalars (Adam step, statistics flag) are in the metadata:
+// "adam_step"/"statistics_empty" for the static set, "distractors": {"views": [names],
+// "adam_step": [...], "statistics_empty": [...]} for the per-view sets.
 #include "desplat/training_checkpoint.hpp"
-
 
 namespace desplat {
 namespace {
 
 const char* kGroupNames[kParamGroups] = {"means", "log_scales", "quats", "opacity_logits", "colors"};
 
+std::string distractor_prefix(size_t view) { return "distractor/" + std::to_string(view); }
+
+void put_trainable(Checkpoint& c, const std::string& prefix, const TrainableGaussians& g) {
+  const uint64_t n = g.size();
+  for (int k = 0; k < kParamGroups; ++k) {
+    const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
+    const std::string name = kGroupNames[k];
+    c.put(prefix + "/" + name, {n, stride}, g.param(ParamGroup(k)));
+    c.put(prefix + "/adam_m/" + name, {n, stride}, g.adam_m[k]);
+    c.put(prefix + "/adam_v/" + name, {n, stride}, g.adam_v[k]);
+  }
+  c.put(prefix + "/stats/absgrad_sum", {n}, g.absgrad_sum);
+  c.put(prefix + "/stats/visible_count", {n}, g.visible_count);
+  c.put(prefix + "/stats/max_screen_radius", {n}, g.max_screen_radius);
+}
+
+GaussianSet get_params(const Checkpoint& c, const std::string& prefix, ColorMode mode, int sh_degree) {
+  GaussianSet g;
+  g.sh_degree = sh_degree;
+  g.color_mode = mode;
+  const uint64_t n = c.array(prefix + "/opacity_logits").shape().at(0);
+  const uint64_t strides[kParamGroups] = {3, 3, 4, 1, uint64_t(g.view().color_floats_per_gaussian())};
+  std::vector<float>* dst[kParamGroups] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors};
+  for (int k = 0; k < kParamGroups; ++k) *dst[k] = c.get<float>(prefix + "/" + kGroupNames[k], {n, strides[k]});
+  return g;
+}
+
+void get_trainable(const Checkpoint& c, const std::string& prefix, TrainableGaussians& g) {
+  g.params = get_params(c, prefix, g.params.color_mode, g.params.sh_degree);
+  const uint64_t n = g.size();
+  for (int k = 0; k < kParamGroups; ++k) {
+    const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
+    g.adam_m[k] = c.get<float>(prefix + "/adam_m/" + kGroupNames[k], {n, stride});
+    g.adam_v[k] = c.get<float>(prefix + "/adam_v/" + kGroupNames[k], {n, stride});
+  }
+  g.absgrad_sum = c.get<float>(prefix + "/stats/absgrad_sum", {n});
+  g.visible_count = c.get<int32_t>(prefix + "/stats/visible_count", {n});
+  g.max_screen_radius = c.get<float>(prefix + "/stats/max_screen_radius", {n});
+  g.check_consistent();
+}
+
 }  // namespace
 
-Checkpoint make_training_checkpoint(const Trainer& trainer, const nlohmann::json& extra_metadata) {
-  const Trainer& t = trainer;
+Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extra_metadata) {
   const TrainableGaussians& g = t.gaussians();
   Checkpoint c;
   c.metadata = extra_metadata.is_object() ? extra_metadata : nlohmann::json::object();
-  c.metadata["step"] = trainer.current_step();
+  c.metadata["step"] = t.current_step();
   c.metadata["adam_step"] = g.adam_step;
   c.metadata["statistics_empty"] = g.statistics_empty;
   c.metadata["sh_degree"] = g.params.sh_degree;
   c.metadata["color_mode"] = g.params.color_mode == ColorMode::RGB ? "rgb" : "sh";
   c.metadata["view_order_pos"] = t.view_order_pos;
   c.metadata["rng"] = save_rng_state(t.rng());
-  const uint64_t n = g.size();
-  for (int k = 0; k < kParamGroups; ++k) {
-    const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
-    const std::string name = kGroupNames[k];
-    c.put("static/" + name, {n, stride}, g.param(ParamGroup(k)));
-    c.put("static/adam_m/" + name, {n, stride}, g.adam_m[k]);
-    c.put("static/adam_v/" + name, {n, stride}, g.adam_v[k]);
+  put_trainable(c, "static", g);
+  if (!t.distractors().empty()) {
+    nlohmann::json views = nlohmann::json::array(), steps = nlohmann::json::array(), empty = nlohmann::json::array();
+    for (size_t v = 0; v < t.distractors().size(); ++v) {
+      const TrainableGaussians& d = t.distractors()[v];
+      put_trainable(c, distractor_prefix(v), d);
+      views.push_back(t.data().train[v].name);
+      steps.push_back(d.adam_step);
+      empty.push_back(d.statistics_empty);
+    }
+    c.metadata["distractors"] = {{"views", views}, {"adam_step", steps}, {"statistics_empty", empty}};
   }
-  c.put("static/stats/absgrad_sum", {n}, g.absgrad_sum);
-  c.put("static/stats/visible_count", {n}, g.visible_count);
-  c.put("static/stats/max_screen_radius", {n}, g.max_screen_radius);
   c.put("trainer/view_order", {t.view_order.size()}, t.view_order);
   return c;
 }
 
 GaussianSet gaussians_from_checkpoint(const Checkpoint& c) {
-  GaussianSet g;
-  g.sh_degree = c.metadata.value("sh_degree", 0);
-  g.color_mode = c.metadata.value("color_mode", std::string("sh")) == "rgb" ? ColorMode::RGB : ColorMode::SphericalHarmonics;
-  const uint64_t n = c.array("static/opacity_logits").shape().at(0);
-  const uint64_t strides[kParamGroups] = {3, 3, 4, 1, uint64_t(g.view().color_floats_per_gaussian())};
-  std::vector<float>* dst[kParamGroups] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors};
-  for (int k = 0; k < kParamGroups; ++k) *dst[k] = c.get<float>(std::string("static/") + kGroupNames[k], {n, strides[k]});
-  return g;
+  const int sh_degree = c.metadata.value("sh_degree", 0);
+  const ColorMode mode =
+      c.metadata.value("color_mode", std::string("sh")) == "rgb" ? ColorMode::RGB : ColorMode::SphericalHarmonics;
+  return get_params(c, "static", mode, sh_degree);
+}
+
+std::vector<std::string> distractor_views_in_checkpoint(const Checkpoint& c) {
+  if (!c.metadata.contains("distractors")) return {};
+  return c.metadata.at("distractors").at("views").get<std::vector<std::string>>();
+}
+
+GaussianSet distractors_from_checkpoint(const Checkpoint& c, size_t index) {
+  return get_params(c, distractor_prefix(index), ColorMode::RGB, 0);
 }
 
 void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
@@ -54,19 +102,25 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   if (sh_degree != g.params.sh_degree)
     throw CheckpointError(c.source.string() + ": checkpoint has SH degree " + std::to_string(sh_degree) +
                           " but the configuration asks for " + std::to_string(g.params.sh_degree));
-  g.params = gaussians_from_checkpoint(c);
-  const uint64_t n = g.size();
-  for (int k = 0; k < kParamGroups; ++k) {
-    const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
-    g.adam_m[k] = c.get<float>(std::string("static/adam_m/") + kGroupNames[k], {n, stride});
-    g.adam_v[k] = c.get<float>(std::string("static/adam_v/") + kGroupNames[k], {n, stride});
-  }
-  g.absgrad_sum = c.get<float>("static/stats/absgrad_sum", {n});
-  g.visible_count = c.get<int32_t>("static/stats/visible_count", {n});
-  g.max_screen_radius = c.get<float>("static/stats/max_screen_radius", {n});
+  const std::vector<std::string> views = distractor_views_in_checkpoint(c);
+  std::vector<TrainableGaussians>& distractors = trainer.mutable_distractors();
+  if (views.size() != distractors.size())
+    throw CheckpointError(c.source.string() + ": checkpoint has distractors for " + std::to_string(views.size()) +
+                          " views but this run has " + std::to_string(distractors.size()) +
+                          (distractors.empty() ? " (distractors are off: --static-only?)" : ""));
+  for (size_t v = 0; v < views.size(); ++v)
+    if (views[v] != trainer.data().train[v].name)
+      throw CheckpointError(c.source.string() + ": distractor buffer " + std::to_string(v) + " belongs to view '" +
+                            views[v] + "' but this run's training view " + std::to_string(v) + " is '" +
+                            trainer.data().train[v].name + "' (another scene or split?)");
+  get_trainable(c, "static", g);
   g.adam_step = c.metadata.at("adam_step").get<int64_t>();
   g.statistics_empty = c.metadata.at("statistics_empty").get<bool>();
-  g.check_consistent();
+  for (size_t v = 0; v < views.size(); ++v) {
+    get_trainable(c, distractor_prefix(v), distractors[v]);
+    distractors[v].adam_step = c.metadata.at("distractors").at("adam_step").at(v).get<int64_t>();
+    distractors[v].statistics_empty = c.metadata.at("distractors").at("statistics_empty").at(v).get<bool>();
+  }
   trainer.view_order = c.get<int32_t>("trainer/view_order");
   trainer.view_order_pos = c.metadata.at("view_order_pos").get<int64_t>();
   restore_rng_state(trainer.rng(), c.metadata.at("rng").get<std::string>());

@@ -11,6 +11,7 @@
 
 #include "desplat/atomic_file.hpp"
 #include "desplat/checkpoint.hpp"
+#include "desplat/composite.hpp"
 #include "desplat/image_io.hpp"
 #include "desplat/ply.hpp"
 #include "desplat/sfm.hpp"
@@ -87,16 +88,30 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
 }
 
-void write_side_by_side(const fs::path& path, const FloatImage& truth, const FloatImage& render) {
-  FloatImage out{truth.width * 2, truth.height, 3, std::vector<float>(size_t(truth.width) * 2 * truth.height * 3)};
-  for (int y = 0; y < truth.height; ++y)
-    for (int x = 0; x < truth.width; ++x)
-      for (int c = 0; c < 3; ++c) {
-        const size_t src = (size_t(y) * truth.width + x) * 3 + c;
-        out.pixels[(size_t(y) * out.width + x) * 3 + c] = truth.pixels[src];
-        out.pixels[(size_t(y) * out.width + truth.width + x) * 3 + c] = render.pixels[src];
-      }
-  write_image(path, out);
+// Parameter memory in MB (float32), the "model size" of the paper's Tables A3/A4.
+double parameter_mb(const TrainableGaussians& g) {
+  size_t floats = 0;
+  for (int k = 0; k < kParamGroups; ++k) floats += g.param(ParamGroup(k)).size();
+  return double(floats) * sizeof(float) / (1024.0 * 1024.0);
+}
+
+// Sizes and memory of both kinds of Gaussians (the paper's Tables A3/A4).
+json model_cost(const Trainer& t) {
+  json per_view = json::array();
+  double distractor_mb = 0;
+  size_t nonempty = 0;
+  for (size_t v = 0; v < t.distractors().size(); ++v) {
+    const TrainableGaussians& d = t.distractors()[v];
+    per_view.push_back({{"name", t.data().train[v].name}, {"count", d.size()}});
+    distractor_mb += parameter_mb(d);
+    nonempty += d.size() > 0;
+  }
+  return {{"static_gaussians", t.gaussians().size()},
+          {"static_mb", parameter_mb(t.gaussians())},
+          {"distractor_gaussians", t.distractor_count()},
+          {"distractor_mb", distractor_mb},
+          {"views_with_distractors", nonempty},
+          {"distractors_per_view", per_view}};
 }
 
 }  // namespace
@@ -157,6 +172,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.seed) config.seed = *opt.seed;
   if (opt.threads) config.threads = *opt.threads;
   if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
+  if (opt.static_only) config.distractors.enabled = false;
+  if (opt.distractors_per_view) config.distractors.initial_count = *opt.distractors_per_view;
+  if (opt.no_distractor_density) config.distractors.density_control = false;
+  if (opt.no_regularization) config.distractors.regularize = false;
 
   SceneOptions scene_options;
   scene_options.downscale = opt.downscale;
@@ -166,6 +185,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
+  if (config.distractors.enabled)
+    std::printf("DeSplat: %d distractor Gaussians per training view%s%s\n", config.distractors.initial_count,
+                config.distractors.density_control ? "" : ", no distractor density control",
+                config.distractors.regularize ? "" : ", no opacity regularizers");
+  else
+    std::printf("static-only (Splatfacto baseline)\n");
 
   const json run_json = {{"data_dir", fs::absolute(data_dir).string()},
                          {"downscale", opt.downscale},
@@ -185,7 +210,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
 
   json history = json::array();
-  std::vector<double> t_fwd, t_bwd, t_loss, t_opt;
+  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
   Progress progress(config.iterations, opt.log_every);
   const auto start = Clock::now();
   const int64_t first = trainer.current_step();
@@ -202,6 +227,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     if (factor == 1) {
       t_fwd.push_back(s.timings.forward), t_bwd.push_back(s.timings.backward);
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
+      t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
+      dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
     }
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
     progress.update(s, elapsed, trainer.current_step() - first);
@@ -209,7 +236,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       history.push_back({{"step", done}, {"mean_psnr", m["mean_psnr"]}, {"mean_ssim", m["mean_ssim"]},
-                         {"gaussians", trainer.gaussians().size()}});
+                         {"gaussians", trainer.gaussians().size()},
+                         {"distractor_gaussians", trainer.distractor_count()}});
     }
     if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
   }
@@ -220,15 +248,22 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const std::vector<ViewMetrics> final_metrics = trainer.evaluate(data.test);
   for (const TrainView& v : data.test) {
     fs::path name = fs::path(v.name).replace_extension(".png");
-    write_side_by_side(opt.out_dir / "renders" / "test" / name, v.image,
-                       trainer.render(v.camera, config.eval_background));
+    const FloatImage render = trainer.render(v.camera, config.eval_background);
+    write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&v.image, &render}));
   }
+  // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
+  if (config.distractors.enabled)
+    for (size_t v = 0; v < data.train.size(); ++v)
+      write_image(opt.out_dir / "renders" / "train" / fs::path(data.train[v].name).replace_extension(".png"),
+                  layers_figure_row(data.train[v].image, trainer.render_layers(v, config.eval_background)));
   write_gaussian_ply(opt.out_dir / "point_cloud.ply", trainer.gaussians().params, data.normalization);
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   json metrics = metrics_json(final_metrics);
   metrics["step"] = trainer.current_step();
   metrics["gaussians"] = trainer.gaussians().size();
+  metrics["mode"] = config.distractors.enabled ? "desplat" : "static-only";
+  metrics["cost"] = model_cost(trainer);
   metrics["history"] = history;
   metrics["wall_seconds_this_run"] = wall;
   metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;
@@ -236,13 +271,16 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"backward", median(t_bwd)},
                                                      {"loss", median(t_loss)},
                                                      {"optimizer_and_density", median(t_opt)},
+                                                     {"distractor_branch", median(t_dist)},
+                                                     {"total", median(t_total)},
+                                                     {"distractor_share", median(dist_share)},
                                                      {"steps_measured", t_fwd.size()}};
   write_file_atomically(opt.out_dir / "metrics.json", metrics.dump(2));
-  std::printf("done: %lld steps in %s, %zu Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
+  std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
               (long long)trainer.current_step(), format_duration(wall).c_str(), trainer.gaussians().size(),
-              metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());
-  std::printf("outputs in %s: metrics.json, renders/test/, point_cloud.ply, checkpoint.ckpt\n",
-              fs::absolute(opt.out_dir).c_str());
+              trainer.distractor_count(), metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());
+  std::printf("outputs in %s: metrics.json, renders/test/%s, point_cloud.ply, checkpoint.ckpt\n",
+              fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
   return 0;
 }
 
