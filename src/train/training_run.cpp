@@ -13,6 +13,7 @@
 #include "desplat/checkpoint.hpp"
 #include "desplat/composite.hpp"
 #include "desplat/image_io.hpp"
+#include "desplat/mask_metrics.hpp"
 #include "desplat/ply.hpp"
 #include "desplat/sfm.hpp"
 #include "desplat/train_config_json.hpp"
@@ -86,6 +87,22 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   }
   const double n = std::max<size_t>(1, m.size());
   return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
+}
+
+// Distractor-mask quality against the scene's ground truth (issue 6 item 7); null without masks.
+json mask_json(const MaskMetrics& m) {
+  if (m.views.empty()) return nullptr;
+  json per = json::array();
+  for (const ViewMaskMetrics& v : m.views)
+    per.push_back({{"name", v.name},
+                   {"iou", v.score.iou},
+                   {"predicted_fraction", v.score.predicted_fraction},
+                   {"truth_fraction", v.score.truth_fraction}});
+  return {{"views", per},
+          {"mean_iou", m.mean_iou},
+          {"occluded_views", m.occluded_views},
+          {"mean_clean_view_false_positive", m.mean_clean_view_false_positive},
+          {"clean_views", m.clean_views}};
 }
 
 // Parameter memory in MB (float32), the "model size" of the paper's Tables A3/A4.
@@ -210,6 +227,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
 
   json history = json::array();
+  const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
+                                     [](const SceneView& v) { return !v.mask_path.empty(); });
   std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
   Progress progress(config.iterations, opt.log_every);
   const auto start = Clock::now();
@@ -235,9 +254,14 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     const int64_t done = trainer.current_step();
     if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
-      history.push_back({{"step", done}, {"mean_psnr", m["mean_psnr"]}, {"mean_ssim", m["mean_ssim"]},
-                         {"gaussians", trainer.gaussians().size()},
-                         {"distractor_gaussians", trainer.distractor_count()}});
+      json point = {{"step", done},
+                    {"wall_seconds", std::chrono::duration<double>(Clock::now() - start).count()},
+                    {"mean_psnr", m["mean_psnr"]},
+                    {"mean_ssim", m["mean_ssim"]},
+                    {"gaussians", trainer.gaussians().size()},
+                    {"distractor_gaussians", trainer.distractor_count()}};
+      if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
+      history.push_back(point);
     }
     if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
   }
@@ -264,6 +288,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   metrics["gaussians"] = trainer.gaussians().size();
   metrics["mode"] = config.distractors.enabled ? "desplat" : "static-only";
   metrics["cost"] = model_cost(trainer);
+  const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
+  metrics["distractor_masks"] = mask_json(masks);
   metrics["history"] = history;
   metrics["wall_seconds_this_run"] = wall;
   metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;
@@ -279,6 +305,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
               (long long)trainer.current_step(), format_duration(wall).c_str(), trainer.gaussians().size(),
               trainer.distractor_count(), metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());
+  if (!masks.views.empty())
+    std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
+                masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
   std::printf("outputs in %s: metrics.json, renders/test/%s, point_cloud.ply, checkpoint.ckpt\n",
               fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
   return 0;

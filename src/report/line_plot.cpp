@@ -1,0 +1,100 @@
+#include "desplat/line_plot.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+namespace desplat {
+namespace {
+
+// Tableau-like palette: distinguishable, and readable on white.
+constexpr unsigned char kPalette[10][3] = {{31, 119, 180}, {255, 127, 14}, {44, 160, 44},  {214, 39, 40},
+                                           {148, 103, 189}, {140, 86, 75}, {227, 119, 194}, {127, 127, 127},
+                                           {188, 189, 34}, {23, 190, 207}};
+
+cv::Scalar bgr(size_t i) {
+  const unsigned char* c = kPalette[i % 10];
+  return cv::Scalar(c[2], c[1], c[0]);
+}
+
+std::string tick_text(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4g", std::abs(v) < 1e-12 ? 0.0 : v);
+  return buf;
+}
+
+}  // namespace
+
+std::array<float, 3> plot_color(size_t i) {
+  const unsigned char* c = kPalette[i % 10];
+  return {c[0] / 255.0f, c[1] / 255.0f, c[2] / 255.0f};
+}
+
+PlotFrame plot_frame(const PlotSpec& spec, const std::vector<PlotSeries>& series) {
+  double x0 = std::numeric_limits<double>::infinity(), x1 = -x0, y0 = x0, y1 = -x0;
+  for (const PlotSeries& s : series) {
+    if (s.x.size() != s.y.size())
+      throw std::invalid_argument("plot series '" + s.label + "' has " + std::to_string(s.x.size()) + " x but " +
+                                  std::to_string(s.y.size()) + " y values");
+    for (size_t i = 0; i < s.x.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      x0 = std::min(x0, s.x[i]), x1 = std::max(x1, s.x[i]);
+      y0 = std::min(y0, s.y[i]), y1 = std::max(y1, s.y[i]);
+    }
+  }
+  if (!std::isfinite(x0)) throw std::invalid_argument("plot '" + spec.title + "' has no finite point");
+  // A single value still gets a visible range.
+  if (x1 - x0 < 1e-12) x0 -= 0.5, x1 += 0.5;
+  if (y1 - y0 < 1e-12) y0 -= 0.5, y1 += 0.5;
+  const double mx = 0.05 * (x1 - x0), my = 0.05 * (y1 - y0);
+  PlotFrame f;
+  f.x_min = x0 - mx, f.x_max = x1 + mx, f.y_min = y0 - my, f.y_max = y1 + my;
+  f.left = 90, f.right = spec.width - 250, f.top = 50, f.bottom = spec.height - 70;
+  return f;
+}
+
+FloatImage draw_line_plot(const PlotSpec& spec, const std::vector<PlotSeries>& series) {
+  const PlotFrame f = plot_frame(spec, series);
+  cv::Mat img(spec.height, spec.width, CV_8UC3, cv::Scalar(255, 255, 255));
+  const cv::Scalar ink(40, 40, 40), grid(225, 225, 225);
+  const int font = cv::FONT_HERSHEY_SIMPLEX;
+  constexpr int kTicks = 6;
+  for (int t = 0; t < kTicks; ++t) {
+    const double xv = f.x_min + (f.x_max - f.x_min) * t / (kTicks - 1);
+    const double yv = f.y_min + (f.y_max - f.y_min) * t / (kTicks - 1);
+    const int px = int(std::lround(f.pixel_x(xv))), py = int(std::lround(f.pixel_y(yv)));
+    cv::line(img, {px, f.top}, {px, f.bottom}, grid, 1);
+    cv::line(img, {f.left, py}, {f.right, py}, grid, 1);
+    cv::putText(img, tick_text(xv), {px - 20, f.bottom + 20}, font, 0.45, ink, 1, cv::LINE_AA);
+    cv::putText(img, tick_text(yv), {8, py + 5}, font, 0.45, ink, 1, cv::LINE_AA);
+  }
+  cv::rectangle(img, {f.left, f.top}, {f.right, f.bottom}, ink, 1);
+  cv::putText(img, spec.title, {f.left, 30}, font, 0.6, ink, 1, cv::LINE_AA);
+  cv::putText(img, spec.x_label, {(f.left + f.right) / 2 - 60, spec.height - 25}, font, 0.5, ink, 1, cv::LINE_AA);
+  cv::putText(img, spec.y_label, {8, f.top - 12}, font, 0.5, ink, 1, cv::LINE_AA);
+
+  for (size_t s = 0; s < series.size(); ++s) {
+    std::vector<cv::Point> pts;
+    for (size_t i = 0; i < series[s].x.size(); ++i)
+      if (std::isfinite(series[s].x[i]) && std::isfinite(series[s].y[i]))
+        pts.emplace_back(int(std::lround(f.pixel_x(series[s].x[i]))), int(std::lround(f.pixel_y(series[s].y[i]))));
+    if (pts.size() > 1) cv::polylines(img, pts, false, bgr(s), 2, cv::LINE_AA);
+    for (const cv::Point& p : pts) cv::circle(img, p, 4, bgr(s), cv::FILLED, cv::LINE_AA);
+    const int ly = f.top + 10 + 22 * int(s);
+    cv::line(img, {f.right + 15, ly}, {f.right + 45, ly}, bgr(s), 3);
+    cv::putText(img, series[s].label, {f.right + 52, ly + 5}, font, 0.45, ink, 1, cv::LINE_AA);
+  }
+
+  FloatImage out{spec.width, spec.height, 3, std::vector<float>(size_t(spec.width) * spec.height * 3)};
+  for (int y = 0; y < spec.height; ++y)
+    for (int x = 0; x < spec.width; ++x) {
+      const cv::Vec3b p = img.at<cv::Vec3b>(y, x);
+      for (int c = 0; c < 3; ++c) out.pixels[(size_t(y) * spec.width + x) * 3 + c] = p[2 - c] / 255.0f;
+    }
+  return out;
+}
+
+}  // namespace desplat
