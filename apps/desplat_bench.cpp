@@ -5,6 +5,7 @@
 
 #include <csignal>
 #include <cstdio>
+#include <optional>
 
 #include "desplat/bench_run.hpp"
 
@@ -23,12 +24,16 @@ int main(int argc, char** argv) {
   app.add_option("--grid", grid_file, "benchmark grid (JSON)")->required()->check(CLI::ExistingFile);
   app.add_option("--out", out_dir, "output folder for bench.csv and the plots")->required();
   app.add_flag("--resume", resume, "keep finished runs of an existing --out/bench.csv");
+  std::optional<int> threads;
+  app.add_option("--threads", threads, "OpenMP threads per run, overriding the grid's (0 = all cores)")
+      ->check(CLI::NonNegativeNumber);
   app.add_flag("--plot-only", plot_only, "only redraw the plots from --out/bench.csv");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
   try {
-    const desplat::BenchGrid grid = desplat::read_bench_grid(grid_file);
+    desplat::BenchGrid grid = desplat::read_bench_grid(grid_file);
+    if (threads) grid.threads = *threads;
     std::vector<desplat::BenchPoint> points;
     if (plot_only) {
       points = desplat::read_bench_csv(out_dir / "bench.csv");

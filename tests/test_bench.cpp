@@ -117,8 +117,21 @@ TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
   EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "config": {"lr": {"meens": 1}}}]})").find("run 'x'"),
             std::string::npos);
   EXPECT_NE(error_of(R"({"scenes": [], "runs": [{"name": "x"}]})").find("no scenes"), std::string::npos);
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x"}], "score_at": "half"})").find("score_at"),
+            std::string::npos);
   EXPECT_NE(error_of("{").find((dir / "g.json").string()), std::string::npos);
   fs::remove_all(dir);
+}
+
+TEST(BenchGrid, CheckedInGridsAreValid) {
+  int grids = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic")) {
+    if (entry.path().filename().string().find("grid") == std::string::npos) continue;
+    const BenchGrid g = read_bench_grid(entry.path());
+    EXPECT_FALSE(g.runs.empty()) << entry.path();
+    ++grids;
+  }
+  EXPECT_EQ(grids, 3);
 }
 
 TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "desplat/ply.hpp"
+#include "desplat/synth.hpp"
 #include "support/scene_on_disk.hpp"
 #include "support/synthetic_views.hpp"
 
@@ -103,6 +104,36 @@ TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {
                           (root_ / "so_renders").string() + " --views train --mask");
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("--mask needs a DeSplat model"), std::string::npos) << bad.output;
+}
+
+// A scene with ground-truth masks: metrics.json scores every training view's distractor mask.
+TEST_F(TrainApp, MetricsScoreDistractorMasksWhenTheSceneHasThem) {
+  synth::GenerateOptions g;
+  g.out = root_ / "masked_scene";
+  const synth::GenerationReport scene =
+      synth::generate_scene(synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_distractors.json"), g);
+  for (const std::string mode : {"", " --static-only"}) {
+    const fs::path out = root_ / ("masked" + std::to_string(mode.size()));
+    const Outcome r = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + g.out.string() + " --out " + out.string() +
+                          " --iterations 20 --threads 2" + mode);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("distractor masks: mean IoU"), std::string::npos) << r.output;
+    nlohmann::json metrics;
+    std::ifstream(out / "metrics.json") >> metrics;
+    const nlohmann::json& masks = metrics["distractor_masks"];
+    ASSERT_EQ(masks["views"].size(), size_t(scene.num_train));
+    EXPECT_EQ(masks["occluded_views"], scene.cluttered_views.size());
+    for (const auto& v : masks["views"]) {
+      const bool cluttered = std::count(scene.cluttered_views.begin(), scene.cluttered_views.end(), v["name"]) > 0;
+      EXPECT_EQ(v["truth_fraction"].get<double>() > 0, cluttered) << v["name"];
+      if (!mode.empty()) {
+        EXPECT_EQ(v["predicted_fraction"], 0.0);  // static-only predicts no distractors
+      }
+    }
+    if (!mode.empty()) {
+      EXPECT_EQ(masks["mean_iou"], 0.0);
+    }
+  }
 }
 
 TEST_F(TrainApp, InterruptWritesCheckpointAndResumeFinishes) {

@@ -8,6 +8,7 @@
 //     "steps": 7000,          // per run unless the run's config sets "iterations"
 //     "eval_every": 500,      // a point on every curve each N steps (and at the end)
 //     "threads": 0,           // OpenMP threads, 0 = all cores
+//     "score_at": "full",     // test views at "full" resolution or at each run's "training" one
 //     "runs": [               // one curve per run and scene
 //       {"name": "DeSplat", "config": {}},
 //       {"name": "static-only", "config": {"distractors": {"enabled": false}}},
@@ -15,8 +16,10 @@
 //     ]
 //   }
 // "config" holds TrainConfig overrides in config.json's format (train_config_json.hpp).
-// Test views are scored at full resolution whatever a run's training downscale, so runs at
-// different resolutions are comparable; masks are scored at the run's training resolution.
+// With "score_at": "full" (the default) test views are scored at full resolution whatever a
+// run's training downscale, so runs at different resolutions are comparable; "training"
+// scores them at the run's own resolution (for comparing settings at one low resolution,
+// where upsampling blur would hide the differences). Masks are scored at the training resolution.
 // Wall time counts training steps only, not evaluation.
 //
 // Outputs in the output folder: bench.csv (rewritten atomically after every point, so an
@@ -48,6 +51,7 @@ struct BenchGrid {
   int64_t steps = 7000;
   int eval_every = 500;
   int threads = 0;
+  bool score_at_full_resolution = true;
 };
 
 // Throws std::invalid_argument naming the file for unreadable or invalid grids (bad JSON,

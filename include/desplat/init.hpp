@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cstdint>
+#include <random>
 #include <vector>
 
 #include "desplat/gaussians.hpp"
@@ -19,5 +20,9 @@ GaussianSet init_gaussians_from_points(const std::vector<std::array<float, 3>>& 
 
 // Mean distance from each point to its k nearest other points (k-d tree, nanoflann).
 std::vector<float> mean_knn_distance(const std::vector<std::array<float, 3>>& xyz, int k);
+
+// A uniformly random unit quaternion (w, x, y, z): a normalized 4D standard normal sample.
+// Draws from `normal` (mean 0, σ 1), so callers keep one random stream.
+std::array<float, 4> random_unit_quaternion(std::mt19937_64& rng, std::normal_distribution<float>& normal);
 
 }  // namespace desplat

@@ -17,6 +17,7 @@ namespace desplat {
 struct PlotSeries {
   std::string label;
   std::vector<double> x, y;  // equal sizes; points are joined in the given order
+  int color = -1;            // palette index; -1: the series' position in the list
 };
 
 struct PlotSpec {
@@ -37,7 +38,7 @@ struct PlotFrame {
 PlotFrame plot_frame(const PlotSpec& spec, const std::vector<PlotSeries>& series);
 
 // White background, axes with ticks and labels, one colored polyline with markers per series
-// (palette color i for series i), a legend. Throws std::invalid_argument when a series' x and y
+// (palette color `color`, or i for series i), a legend. Throws std::invalid_argument when a series' x and y
 // sizes differ or there is no finite point at all.
 FloatImage draw_line_plot(const PlotSpec& spec, const std::vector<PlotSeries>& series);
 

@@ -6,7 +6,9 @@
 //   checkpoint.ckpt      latest checkpoint (atomic; --resume continues from it)
 //   metrics.json         test-view PSNR/SSIM per image and mean, evaluation history,
 //                        Gaussian counts and MB (static, distractor), timings (median per
-//                        step at full resolution, distractor branch separately)
+//                        step at full resolution, distractor branch separately), and
+//                        distractor_masks (IoU per training view and mean) when the scene
+//                        has ground-truth masks (masks.hpp)
 //   renders/test/*.png   ground truth | render, side by side, per test view
 //   renders/train/*.png  DeSplat only: truth | static | distractor | composite | mask per
 //                        training view (the paper's Fig. 2)

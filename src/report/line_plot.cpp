@@ -52,7 +52,14 @@ PlotFrame plot_frame(const PlotSpec& spec, const std::vector<PlotSeries>& series
   const double mx = 0.05 * (x1 - x0), my = 0.05 * (y1 - y0);
   PlotFrame f;
   f.x_min = x0 - mx, f.x_max = x1 + mx, f.y_min = y0 - my, f.y_max = y1 + my;
-  f.left = 90, f.right = spec.width - 250, f.top = 50, f.bottom = spec.height - 70;
+  // The legend sits right of the axes: leave room for the longest label.
+  int legend = 0;
+  for (const PlotSeries& s : series) {
+    int baseline = 0;
+    legend = std::max(legend, cv::getTextSize(s.label, cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, &baseline).width);
+  }
+  f.left = 90, f.right = spec.width - std::clamp(legend + 70, 150, spec.width / 2), f.top = 62;
+  f.bottom = spec.height - 70;
   return f;
 }
 
@@ -72,19 +79,20 @@ FloatImage draw_line_plot(const PlotSpec& spec, const std::vector<PlotSeries>& s
     cv::putText(img, tick_text(yv), {8, py + 5}, font, 0.45, ink, 1, cv::LINE_AA);
   }
   cv::rectangle(img, {f.left, f.top}, {f.right, f.bottom}, ink, 1);
-  cv::putText(img, spec.title, {f.left, 30}, font, 0.6, ink, 1, cv::LINE_AA);
+  cv::putText(img, spec.title, {8, 24}, font, 0.6, ink, 1, cv::LINE_AA);
   cv::putText(img, spec.x_label, {(f.left + f.right) / 2 - 60, spec.height - 25}, font, 0.5, ink, 1, cv::LINE_AA);
-  cv::putText(img, spec.y_label, {8, f.top - 12}, font, 0.5, ink, 1, cv::LINE_AA);
+  cv::putText(img, spec.y_label, {8, f.top - 14}, font, 0.5, ink, 1, cv::LINE_AA);
 
   for (size_t s = 0; s < series.size(); ++s) {
+    const cv::Scalar color = bgr(series[s].color >= 0 ? size_t(series[s].color) : s);
     std::vector<cv::Point> pts;
     for (size_t i = 0; i < series[s].x.size(); ++i)
       if (std::isfinite(series[s].x[i]) && std::isfinite(series[s].y[i]))
         pts.emplace_back(int(std::lround(f.pixel_x(series[s].x[i]))), int(std::lround(f.pixel_y(series[s].y[i]))));
-    if (pts.size() > 1) cv::polylines(img, pts, false, bgr(s), 2, cv::LINE_AA);
-    for (const cv::Point& p : pts) cv::circle(img, p, 4, bgr(s), cv::FILLED, cv::LINE_AA);
+    if (pts.size() > 1) cv::polylines(img, pts, false, color, 2, cv::LINE_AA);
+    for (const cv::Point& p : pts) cv::circle(img, p, 4, color, cv::FILLED, cv::LINE_AA);
     const int ly = f.top + 10 + 22 * int(s);
-    cv::line(img, {f.right + 15, ly}, {f.right + 45, ly}, bgr(s), 3);
+    cv::line(img, {f.right + 15, ly}, {f.right + 45, ly}, color, 3);
     cv::putText(img, series[s].label, {f.right + 52, ly + 5}, font, 0.45, ink, 1, cv::LINE_AA);
   }
 

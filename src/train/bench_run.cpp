@@ -86,6 +86,10 @@ BenchGrid read_bench_grid(const fs::path& file) {
         g.eval_every = value.get<int>();
       } else if (key == "threads") {
         g.threads = value.get<int>();
+      } else if (key == "score_at") {
+        const std::string where = value.get<std::string>();
+        if (where != "full" && where != "training") fail("score_at must be \"full\" or \"training\"");
+        g.score_at_full_resolution = where == "full";
       } else if (key == "runs") {
         for (const json& r : value) {
           BenchRun run;
@@ -180,14 +184,15 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
       options.downscale = run.downscale;
       const Scene scene = load_colmap_scene(scene_dir, options);
       const TrainingData data = load_training_data(scene);
-      if (!full) {
+      if (!full && grid.score_at_full_resolution) {
         if (run.downscale == 1) {
           full = std::make_unique<TrainingData>(data);
         } else {
           full = std::make_unique<TrainingData>(load_training_data(load_colmap_scene(scene_dir, SceneOptions{})));
         }
       }
-      if (full->test.empty()) throw std::invalid_argument(scene_dir.string() + " has no test views to score");
+      const std::vector<TrainView>& test_views = grid.score_at_full_resolution ? full->test : data.test;
+      if (test_views.empty()) throw std::invalid_argument(scene_dir.string() + " has no test views to score");
       const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
                                          [](const SceneView& v) { return !v.mask_path.empty(); });
       Trainer trainer(data, config);
@@ -199,7 +204,7 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
         seconds += std::chrono::duration<double>(Clock::now() - t0).count();
         const int64_t step = trainer.current_step();
         if (step % grid.eval_every != 0 && step != config.iterations) continue;
-        const std::vector<ViewMetrics> m = trainer.evaluate(full->test);
+        const std::vector<ViewMetrics> m = trainer.evaluate(test_views);
         BenchPoint p;
         p.scene = name, p.run = run.name, p.clutter_ratio = clutter, p.desplat = config.distractors.enabled;
         p.step = step, p.train_seconds = seconds;
@@ -233,8 +238,9 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
   for (const std::string& scene : scenes)
     for (const Metric& metric : metrics) {
       std::vector<PlotSeries> series;
-      for (const std::string& run : runs) {
-        PlotSeries s{run, {}, {}};
+      for (size_t r = 0; r < runs.size(); ++r) {
+        const std::string& run = runs[r];
+        PlotSeries s{run, {}, {}, int(r)};  // a run keeps its color in every plot
         for (const BenchPoint& p : points) {
           if (p.scene != scene || p.run != run) continue;
           if (metric.field == &BenchPoint::mask_iou && (!p.desplat || p.mask_iou < 0)) continue;
@@ -251,7 +257,8 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
     }
   // Final PSNR against clutter ratio, one series per run, over scenes that carry a ratio.
   std::vector<PlotSeries> clutter;
-  for (const std::string& run : runs) {
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const std::string& run = runs[r];
     std::vector<std::pair<double, double>> xy;
     for (const std::string& scene : scenes) {
       const BenchPoint* last = nullptr;
@@ -260,7 +267,7 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
       if (last) xy.emplace_back(100 * last->clutter_ratio, last->psnr);
     }
     std::sort(xy.begin(), xy.end());
-    PlotSeries s{run, {}, {}};
+    PlotSeries s{run, {}, {}, int(r)};
     for (const auto& [x, y] : xy) s.x.push_back(x), s.y.push_back(y);
     if (s.x.size() >= 2) clutter.push_back(s);
   }

@@ -34,13 +34,9 @@ GaussianSet init_distractors(const Camera& cam, const DistractorSettings& s, uin
   const float opacity_logit = std::log(s.init_opacity / (1 - s.init_opacity));
   for (size_t i = 0; i < n; ++i) {
     const float log_scale = std::log(std::max(dist[i], 1e-7f));
-    float q[4], n2 = 0;
-    do {  // a normalized 4D Gaussian sample is a uniformly random unit quaternion
-      n2 = 0;
-      for (float& v : q) v = normal(rng), n2 += v * v;
-    } while (n2 < 1e-12f);
+    const std::array<float, 4> q = random_unit_quaternion(rng, normal);
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = world[i][k], g.log_scales[3 * i + k] = log_scale;
-    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k] / std::sqrt(n2);
+    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k];
     g.opacity_logits[i] = opacity_logit;
     for (int c = 0; c < 3; ++c) g.colors[3 * i + c] = unit(rng);
   }

@@ -63,17 +63,25 @@ GaussianSet init_gaussians_from_points(const std::vector<std::array<float, 3>>& 
   for (size_t i = 0; i < xyz.size(); ++i) {
     // Coincident points have zero neighbour distance; keep the log finite.
     const float log_scale = std::log(std::max(dist[i], 1e-7f));
-    float q[4], n2 = 0;
-    do {  // a normalized 4D Gaussian sample is a uniformly random unit quaternion
-      n2 = 0;
-      for (float& v : q) v = normal(rng), n2 += v * v;
-    } while (n2 < 1e-12f);
+    const std::array<float, 4> q = random_unit_quaternion(rng, normal);
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = xyz[i][k], g.log_scales[3 * i + k] = log_scale;
-    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k] / std::sqrt(n2);
+    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k];
     g.opacity_logits[i] = opacity_logit;
     for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (rgb[i][c] / 255.0f - 0.5f) / kShY0;
   }
   return g;
+}
+
+std::array<float, 4> random_unit_quaternion(std::mt19937_64& rng, std::normal_distribution<float>& normal) {
+  std::array<float, 4> q;
+  float n2 = 0;
+  do {
+    n2 = 0;
+    for (float& v : q) v = normal(rng), n2 += v * v;
+  } while (n2 < 1e-12f);
+  const float norm = std::sqrt(n2);
+  for (float& v : q) v /= norm;
+  return q;
 }
 
 }  // namespace desplat
