@@ -125,7 +125,7 @@ TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
 
 TEST(BenchGrid, CheckedInGridsAreValid) {
   int grids = 0;
-  for (const auto& entry : fs::directory_iterator(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic")) {
+  for (const auto& entry : fs::directory_iterator(fs::path(DESPLAT_SOURCE_DIR) / "data/bench")) {
     if (entry.path().filename().string().find("grid") == std::string::npos) continue;
     const BenchGrid g = read_bench_grid(entry.path());
     EXPECT_FALSE(g.runs.empty()) << entry.path();

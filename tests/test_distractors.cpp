@@ -2,6 +2,7 @@
 // schedule and rules (§7), and their life inside the trainer (only their view touches them,
 // emptied views cost nothing, ablation switches, checkpoints resume bit-exactly).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -241,7 +242,7 @@ TEST(DistractorTraining, ResumeReproducesUninterruptedRunBitExactly) {
   Trainer straight(data, cfg);
   for (int i = 0; i < 380; ++i) straight.step();
 
-  const std::filesystem::path file = std::filesystem::temp_directory_path() / "desplat_distractor_resume.ckpt";
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / ("desplat_distractor_resume_" + std::to_string(::getpid()) + ".ckpt");
   {
     Trainer first(data, cfg);
     for (int i = 0; i < 155; ++i) first.step();  // after distractor refinements, mid-epoch

@@ -20,7 +20,8 @@ struct Outcome {
 };
 
 Outcome run(const std::string& command) {
-  const fs::path log = fs::temp_directory_path() / "desplat_app_test.log";
+  // One log per process: ctest runs these tests as parallel processes.
+  const fs::path log = fs::temp_directory_path() / ("desplat_app_test_" + std::to_string(::getpid()) + ".log");
   const int status = std::system((command + " > " + log.string() + " 2>&1").c_str());
   std::ifstream f(log);
   std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());

@@ -1,5 +1,6 @@
 // Short training runs on a scene with known ground truth.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 
@@ -93,7 +94,7 @@ TEST(Training, ResumeReproducesUninterruptedRunBitExactly) {
   Trainer straight(data, cfg);
   for (int i = 0; i < 260; ++i) straight.step();
 
-  const std::filesystem::path file = std::filesystem::temp_directory_path() / "desplat_resume_test.ckpt";
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / ("desplat_resume_test_" + std::to_string(::getpid()) + ".ckpt");
   {
     Trainer first(data, cfg);
     for (int i = 0; i < 155; ++i) first.step();  // past refinements at 150; mid-epoch

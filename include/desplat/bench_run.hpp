@@ -65,7 +65,7 @@ struct BenchPoint {
   int64_t step = 0;
   double train_seconds = 0;   // cumulative, training steps only
   double psnr = 0, ssim = 0;  // mean over the scene's test views, full resolution
-  double mask_iou = -1;       // mean over occluded training views; -1 without ground truth
+  double mask_iou = -1;       // mean over occluded training views; -1 when the scene has none
   size_t static_gaussians = 0, distractor_gaussians = 0;
 };
 

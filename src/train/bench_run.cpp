@@ -209,7 +209,10 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
         p.scene = name, p.run = run.name, p.clutter_ratio = clutter, p.desplat = config.distractors.enabled;
         p.step = step, p.train_seconds = seconds;
         p.psnr = mean(m, &ViewMetrics::psnr), p.ssim = mean(m, &ViewMetrics::ssim);
-        if (has_masks) p.mask_iou = evaluate_distractor_masks(trainer, scene).mean_iou;
+        if (has_masks) {
+          const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
+          if (masks.occluded_views > 0) p.mask_iou = masks.mean_iou;  // no occluded view: no IoU
+        }
         p.static_gaussians = trainer.gaussians().size(), p.distractor_gaussians = trainer.distractor_count();
         points.push_back(p);
         write_bench_csv(csv, points);
