@@ -3,16 +3,11 @@
 // format and the outputs are described in include/desplat/bench_run.hpp.
 #include <CLI/CLI.hpp>
 
-#include <csignal>
 #include <cstdio>
 #include <optional>
 
 #include "desplat/bench_run.hpp"
-
-namespace {
-std::atomic<bool> g_stop{false};
-void on_signal(int) { g_stop.store(true); }
-}  // namespace
+#include "stop_signal.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -29,8 +24,7 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--plot-only", plot_only, "only redraw the plots from --out/bench.csv");
   CLI11_PARSE(app, argc, argv);
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  const std::atomic<bool>& stop = desplat_apps::stop_on_signals();
   try {
     desplat::BenchGrid grid = desplat::read_bench_grid(grid_file);
     if (threads) grid.threads = *threads;
@@ -38,7 +32,7 @@ int main(int argc, char** argv) {
     if (plot_only) {
       points = desplat::read_bench_csv(out_dir / "bench.csv");
     } else {
-      points = desplat::run_bench(grid, out_dir, resume, g_stop, [](const desplat::BenchPoint& p) {
+      points = desplat::run_bench(grid, out_dir, resume, stop, [](const desplat::BenchPoint& p) {
         std::printf("%s / %s: step %lld, %.1f s, PSNR %.2f dB, SSIM %.4f", p.scene.c_str(), p.run.c_str(),
                     (long long)p.step, p.train_seconds, p.psnr, p.ssim);
         if (p.mask_iou >= 0 && p.desplat) std::printf(", mask IoU %.3f", p.mask_iou);
@@ -48,7 +42,7 @@ int main(int argc, char** argv) {
     }
     for (const auto& file : desplat::write_bench_plots(out_dir, points)) std::printf("wrote %s\n", file.c_str());
     std::printf("wrote %s\n", (out_dir / "bench.csv").c_str());
-    if (g_stop.load()) {
+    if (stop.load()) {
       std::printf("interrupted; continue with --resume\n");
       return 130;
     }

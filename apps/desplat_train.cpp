@@ -2,15 +2,10 @@
 // of photos, via COLMAP) on the CPU. Options only; the job is desplat::run_training.
 #include <CLI/CLI.hpp>
 
-#include <csignal>
 #include <cstdio>
 
 #include "desplat/training_run.hpp"
-
-namespace {
-std::atomic<bool> g_stop{false};
-void on_signal(int) { g_stop.store(true); }
-}  // namespace
+#include "stop_signal.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -60,11 +55,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "desplat_train: give --data DIR (COLMAP scene) or --images DIR (photos)\n");
     return 2;
   }
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  const std::atomic<bool>& stop = desplat_apps::stop_on_signals();
   try {
     o.split.rule = desplat::split_rule_from_name(split_rule);
-    return desplat::run_training(o, g_stop);
+    return desplat::run_training(o, stop);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "desplat_train: error: %s\n", e.what());
     return 1;

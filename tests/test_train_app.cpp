@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <OpenImageIO/imageio.h>
 
 #include "desplat/ply.hpp"
 #include "desplat/synth.hpp"
@@ -86,6 +87,32 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   EXPECT_TRUE(fs::exists(layers / "view_1.png"));
   EXPECT_TRUE(fs::exists(layers / "view_1_mask.png"));
   EXPECT_FALSE(fs::exists(layers / "view_0.png"));  // a test view
+  // --alpha writes straight RGBA: re-compositing it over the evaluation background gives the
+  // plain layer image, and its alpha agrees with the mask (A_d > 0.5).
+  const fs::path plain = root_ / "layers_plain";
+  ASSERT_EQ(run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " + plain.string() +
+                " --layer distractor --views view_1.png").exit_code, 0);
+  OIIO::ImageSpec raw_file;  // the file's own straight values, as a viewer sees them
+  raw_file.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open((layers / "view_1.png").string(), &raw_file);
+  ASSERT_TRUE(in);
+  ASSERT_EQ(in->spec().nchannels, 4);
+  std::vector<float> rgba(size_t(in->spec().width) * in->spec().height * 4);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 4, OIIO::TypeDesc::FLOAT, rgba.data()));
+  in->close();
+  const FloatImage shown = read_image_rgb(plain / "view_1.png");
+  const FloatImage mask = read_image_rgb(layers / "view_1_mask.png");
+  const std::vector<float> bg = config["train"]["eval_background"].get<std::vector<float>>();
+  ASSERT_EQ(rgba.size() / 4, shown.pixels.size() / 3);
+  int covered = 0;
+  for (size_t p = 0; p < rgba.size() / 4; ++p) {
+    const float a = rgba[4 * p + 3];
+    EXPECT_EQ(a > 0.5f, mask.pixels[3 * p] > 0.5f) << p;
+    covered += a > 0.5f;
+    for (int c = 0; c < 3; ++c)  // 8-bit PNGs: a few quantization steps
+      ASSERT_NEAR(rgba[4 * p + c] * a + (1 - a) * bg[c], shown.pixels[3 * p + c], 3.0 / 255) << p;
+  }
+  EXPECT_GT(covered, 0);  // 120 steps: the initial distractors still cover part of the view
   // Test views have no distractors: asking for that layer there is one clear error.
   const Outcome bad_layer = run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " +
                                 renders.string() + " --layer distractor");

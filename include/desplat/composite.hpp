@@ -68,7 +68,10 @@ struct ViewLayers {
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
                               const RasterSettings& settings, const std::array<float, 3>& background);
 
-// The distractor mask of a view: 1 where A_d > 0.5, else 0 ([H, W, 1]).
+// A pixel is a distractor pixel where A_d exceeds this (REFERENCE.md §8).
+constexpr float kDistractorMaskThreshold = 0.5f;
+
+// The distractor mask of a view: 1 where A_d > kDistractorMaskThreshold, else 0 ([H, W, 1]).
 FloatImage distractor_mask(const ViewLayers& layers);
 
 // The paper's Fig. 2 row for a training view: ground truth | static | distractor |

@@ -104,6 +104,8 @@ class Trainer {
   FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;
   // Every layer of training view `train_view` at its full training resolution.
   ViewLayers render_layers(size_t train_view, const std::array<float, 3>& background) const;
+  // What every render at this step uses: the configured threads and the active SH degree.
+  RasterSettings raster_settings() const;
   // PSNR/SSIM of every view's render over the evaluation background.
   std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
 
@@ -131,9 +133,10 @@ class Trainer {
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
-  int64_t prune_nonfinite(TrainableGaussians& g, const std::string& what);
+  // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
+  // (built only when something is pruned).
+  int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
   RefineReport refine_all_distractors(int image_size);
-  RasterSettings raster_settings() const;
 };
 
 // Camera and image at 1/factor resolution (block average, sizes rounded down).

@@ -44,7 +44,10 @@ void write_image(const std::filesystem::path& path, const FloatImage& image) {
   }
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   auto out = OIIO::ImageOutput::create(path.string());
-  const OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::UINT8);
+  OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::UINT8);
+  // Our RGBA is straight (unassociated) alpha, as PNG stores it: without this OIIO would
+  // treat it as premultiplied and divide the colors by alpha once more.
+  spec.attribute("oiio:UnassociatedAlpha", 1);
   if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, bytes.data()) ||
       !out->close())
     throw ImageError("cannot write image " + path.string() + ": " + OIIO::geterror());

@@ -113,7 +113,7 @@ ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* dis
 
 FloatImage distractor_mask(const ViewLayers& layers) {
   FloatImage m = layers.distractor_alpha;
-  for (float& a : m.pixels) a = a > 0.5f ? 1.0f : 0.0f;
+  for (float& a : m.pixels) a = a > kDistractorMaskThreshold ? 1.0f : 0.0f;
   return m;
 }
 

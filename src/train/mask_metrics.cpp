@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "desplat/composite.hpp"
+#include "desplat/raster.hpp"
 
 namespace desplat {
 
@@ -19,8 +20,14 @@ MaskMetrics evaluate_distractor_masks(const Trainer& trainer, const Scene& scene
     const auto found = scene_view.find(train[v].name);
     if (found == scene_view.end()) continue;
     const FloatImage truth = load_view_mask(scene, found->second);
-    // Render over black: the mask depends only on A_d, not on the background.
-    const FloatImage predicted = distractor_mask(trainer.render_layers(v, {0, 0, 0}));
+    // The mask is A_d > 0.5: only the view's distractors need rasterizing.
+    const Camera& cam = train[v].camera;
+    FloatImage predicted{cam.width, cam.height, 1, std::vector<float>(size_t(cam.width) * cam.height, 0.0f)};
+    if (!trainer.distractors().empty() && trainer.distractors()[v].size() > 0) {
+      RasterOutput d;
+      rasterize_forward(trainer.distractors()[v].params.view(), cam, trainer.raster_settings(), d);
+      for (size_t p = 0; p < d.alpha.size(); ++p) predicted.pixels[p] = d.alpha[p] > kDistractorMaskThreshold ? 1.0f : 0.0f;
+    }
     if (truth.width != predicted.width || truth.height != predicted.height)
       throw std::invalid_argument("distractor mask of view '" + train[v].name + "' is " + std::to_string(truth.width) +
                                   "x" + std::to_string(truth.height) + " but the training view is " +

@@ -102,31 +102,31 @@ int run_render(const RenderRunOptions& o) {
     const auto buffer = buffer_of.find(view.name);
     GaussianSet distractors;
     if (buffer != buffer_of.end()) distractors = distractors_from_checkpoint(ckpt, buffer->second);
-    const ViewLayers layers = render_view_layers(statics, buffer != buffer_of.end() ? &distractors : nullptr,
-                                                 view.camera, rs, train.eval_background);
+    const GaussianSet* d = buffer != buffer_of.end() ? &distractors : nullptr;
+    auto render = [&](const std::array<float, 3>& bg) { return render_view_layers(statics, d, view.camera, rs, bg); };
+    // With --alpha the layer over black is its premultiplied color; otherwise it is shown over
+    // the evaluation background. The mask does not depend on the background.
+    const ViewLayers layers = render(o.alpha ? std::array<float, 3>{0, 0, 0} : train.eval_background);
     const fs::path stem = o.out_dir / fs::path(view.name).replace_extension();
     const FloatImage& image = o.layer == "static" ? layers.statics
                               : o.layer == "distractor" ? layers.distractor
                                                         : layers.composite;
     if (o.alpha) {
-      // The layer over black is its premultiplied color; the alpha is the layer's coverage.
-      const ViewLayers black = render_view_layers(statics, buffer != buffer_of.end() ? &distractors : nullptr,
-                                                  view.camera, rs, {0, 0, 0});
       FloatImage alpha = o.layer == "static" ? layers.static_alpha : layers.distractor_alpha;
       if (o.layer == "composite")
         for (size_t p = 0; p < alpha.pixels.size(); ++p)
           alpha.pixels[p] = 1 - (1 - layers.static_alpha.pixels[p]) * (1 - layers.distractor_alpha.pixels[p]);
-      const FloatImage& premultiplied = o.layer == "static" ? black.statics
-                                        : o.layer == "distractor" ? black.distractor
-                                                                  : black.composite;
-      write_image(stem.string() + ".png", with_alpha(premultiplied, alpha));
+      write_image(stem.string() + ".png", with_alpha(image, alpha));
     } else {
       write_image(stem.string() + ".png", image);
     }
     ++written;
     if (o.mask) write_image(stem.string() + "_mask.png", distractor_mask(layers)), ++written;
-    if (o.figure)
-      write_image(stem.string() + "_row.png", layers_figure_row(load_view_image(scene, i), layers)), ++written;
+    if (o.figure) {
+      const FloatImage truth = load_view_image(scene, i);
+      const FloatImage row = layers_figure_row(truth, o.alpha ? render(train.eval_background) : layers);
+      write_image(stem.string() + "_row.png", row), ++written;
+    }
   }
   return written;
 }

@@ -178,7 +178,7 @@ StepStats Trainer::step() {
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
   const double decay = double(lr.means) / double(config_.lr.means);  // the distractors' means follow it
   gaussians_.adam_update(grads_, lr, AdamSettings{});
-  stats.nonfinite_pruned = prune_nonfinite(gaussians_, "static Gaussian");
+  stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
   const int image_size = std::max(cam.width, cam.height);
   stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                   static_cast<int>(data_.train.size()), rng_);
@@ -194,7 +194,7 @@ StepStats Trainer::step() {
       LearningRates dlr = config_.distractors.lr;
       dlr.means = float(dlr.means * decay);
       distractors->adam_update(distractor_grads_, dlr, AdamSettings{});
-      stats.nonfinite_pruned += prune_nonfinite(*distractors, "distractor of view " + data_.train[view].name);
+      stats.nonfinite_pruned += prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
     }
     if (refine_distractors_now) stats.distractor_refine = refine_all_distractors(image_size);
     stats.timings.distractor += seconds_since(t0);
@@ -219,9 +219,9 @@ RefineReport Trainer::refine_all_distractors(int image_size) {
 
 // A Gaussian whose parameter or Adam moment is not finite is removed before it can
 // spread NaN through the blending of its neighbours.
-int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::string& what) {
+int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std::string()>& what) {
   const size_t n = gs.size();
-  std::vector<uint8_t> keep(n, 1);
+  std::vector<uint8_t> keep;  // allocated only when something is pruned (rare): this runs every step
   int64_t bad = 0;
   for (int g = 0; g < kParamGroups; ++g) {
     const ParamGroup group = ParamGroup(g);
@@ -231,9 +231,10 @@ int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::string& what
       for (int k = 0; k < stride; ++k) {
         const size_t j = i * stride + k;
         if (std::isfinite(p[j]) && std::isfinite(gs.adam_m[g][j]) && std::isfinite(gs.adam_v[g][j])) continue;
+        if (keep.empty()) keep.assign(n, 1);
         if (keep[i]) {
           ++bad;
-          warn("step " + std::to_string(step_) + ": " + what + " " + std::to_string(i) +
+          warn("step " + std::to_string(step_) + ": " + what() + " " + std::to_string(i) +
                " has a non-finite parameter or optimizer moment (group " + std::to_string(g) + "); pruned");
         }
         keep[i] = 0;
