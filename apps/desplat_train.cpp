@@ -28,7 +28,8 @@ int main(int argc, char** argv) {
   app.add_flag("--static-only", o.static_only,
                "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
   app.add_option("--distractors-per-view", o.distractors_per_view,
-                 "initial distractor Gaussians per training view (default 1000)")
+                 "exactly N initial distractor Gaussians per training view (default: 1000 per 504x378 "
+                 "pixels, the paper's density, scaled with the training image size)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--no-distractor-density", o.no_distractor_density,
                "ablation: never split/duplicate/cull distractors");

@@ -1,9 +1,14 @@
 // DeSplat on real photos with known distractors, small and fast: the fox capture with
 // occluders pasted into half of its training views (desplat_occlude's recipe, as
-// data/synthetic/make_fox_occluded.sh), trained at 1/8 resolution for 2,000 steps. The
-// independent expectation is the pasted masks. The issue also asks for DeSplat's test PSNR
-// to beat --static-only at equal steps; at the scales this machine can train it does not
-// (README, "DeSplat on real photos with known distractors"), so that is not asserted here.
+// data/synthetic/make_fox_occluded.sh), trained at 1/8 resolution for 2,000 steps, once as
+// DeSplat with its defaults and once --static-only. The independent expectations are the
+// pasted masks and the clean held-out photos.
+//
+// What is asserted: the distractor masks match the occluders, clean views stay clean, and
+// the static layer scores a higher test SSIM than the baseline trained on the same occluded
+// photos. Test PSNR is printed, not asserted: with the paper's distractor density it is
+// level with the baseline here (README, "Distractor density"), not above it, which is why
+// the issue that asks for the PSNR direction stays open.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -18,7 +23,13 @@ namespace fs = std::filesystem;
 
 const fs::path kFox = "/work/shared/data/fox";
 
-TEST(DeSplatEvidence, OccludedFoxDistractorMasksMatchThePastedOccluders) {
+double mean_of(const std::vector<ViewMetrics>& v, double ViewMetrics::*field) {
+  double s = 0;
+  for (const ViewMetrics& m : v) s += m.*field;
+  return s / double(v.size());
+}
+
+TEST(DeSplatEvidence, OccludedFoxMasksMatchTheOccludersAndTheStaticLayerBeatsTheBaselineInSsim) {
   const fs::path dir = fs::temp_directory_path() / ("desplat_evidence_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   OccludeOptions o;
@@ -37,7 +48,17 @@ TEST(DeSplatEvidence, OccludedFoxDistractorMasksMatchThePastedOccluders) {
   config.num_downscales = 0;  // train at 1/8 from the start: 2,000 steps at 1/32 would say little
   config.threads = 0;
   Trainer desplat(data, config);
+  EXPECT_EQ(desplat.distractors()[0].size(), 39u);  // 1,000 · (64·117) / (504·378): the paper's density
   while (desplat.current_step() < config.iterations) desplat.step();
+  config.distractors.enabled = false;
+  Trainer baseline(data, config);
+  while (baseline.current_step() < config.iterations) baseline.step();
+
+  const std::vector<ViewMetrics> ours = desplat.evaluate(data.test), theirs = baseline.evaluate(data.test);
+  const double ssim_ours = mean_of(ours, &ViewMetrics::ssim), ssim_theirs = mean_of(theirs, &ViewMetrics::ssim);
+  std::printf("test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n",
+              mean_of(ours, &ViewMetrics::psnr), ssim_ours, mean_of(theirs, &ViewMetrics::psnr), ssim_theirs);
+  EXPECT_GT(ssim_ours, ssim_theirs);
 
   // Masks: A_d > 0.5 against the pasted occluders.
   const MaskMetrics masks = evaluate_distractor_masks(desplat, occluded);
@@ -50,8 +71,8 @@ TEST(DeSplatEvidence, OccludedFoxDistractorMasksMatchThePastedOccluders) {
   // than they disagree, on average over the 22 views.
   EXPECT_GT(masks.mean_iou, 0.5);
   // Clean views: a distractor layer that had taken over the static scene would flag much of
-  // the image; allow 5 % (stray splats at edges and in regions few views see).
-  EXPECT_LT(masks.mean_clean_view_false_positive, 0.05);
+  // the image; allow 1 % (stray splats at edges and in regions few views see).
+  EXPECT_LT(masks.mean_clean_view_false_positive, 0.01);
 
   fs::remove_all(dir);
 }

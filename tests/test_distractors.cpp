@@ -27,6 +27,7 @@ std::array<double, 3> to_camera(const Camera& c, const float* x) {
 TEST(Distractors, InitializedOnAPlaneInFrontOfTheirCamera) {
   const Camera cam = look_at_camera(0.7f, 1.0f, 64, 48);
   DistractorSettings s;
+  s.reference_pixels = 0;  // exactly initial_count
   const GaussianSet g = init_distractors(cam, s, 42);
   ASSERT_EQ(g.size(), 1000u);
   EXPECT_EQ(g.color_mode, ColorMode::RGB);
@@ -66,6 +67,22 @@ TEST(Distractors, InitializedOnAPlaneInFrontOfTheirCamera) {
   EXPECT_EQ(init_distractors(cam, s, 1).size(), 0u);
   s.initial_count = -1;
   EXPECT_THROW(init_distractors(cam, s, 1), std::invalid_argument);
+}
+
+TEST(Distractors, DefaultCountKeepsThePapersDensityOnTheImage) {
+  DistractorSettings s;  // 1,000 for a 504×378 image
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 504, 378), s), 1000);
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 252, 189), s), 250);
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 1008, 756), s), 4000);
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), 16);   // 1000 · 3072 / 190512
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 4, 3), s), 1);      // never rounds to none
+  EXPECT_EQ(init_distractors(look_at_camera(0.7f, 1.0f, 64, 48), s, 7).size(), 16u);
+  s.initial_count = 0;
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 504, 378), s), 0);
+  s.initial_count = 300, s.reference_pixels = 0;  // a fixed count
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), 300);
+  s.reference_pixels = -1;
+  EXPECT_THROW(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), std::invalid_argument);
 }
 
 TEST(Distractors, RefinementScheduleIsEveryTenEpochsUntilTheEnd) {
@@ -133,6 +150,7 @@ TrainConfig desplat_config(int64_t iterations) {
   c.densify.reset_alpha_every = 1000;
   c.threads = 2;
   c.distractors.initial_count = 200;
+  c.distractors.reference_pixels = 0;  // 200 per view even on these tiny images
   return c;
 }
 

@@ -44,7 +44,10 @@ class TrainApp : public ::testing::Test {
 
 TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   const fs::path out = root_ / "out";
-  const Outcome r = run(train() + " --out " + out.string() + " --iterations 120 --threads 2 --log-every 40 --eval-every 60");
+  // 200 distractors per view (the default density gives 16 on 64×48 images): enough that some
+  // still cover their view after 120 steps, for the layer and mask checks below.
+  const Outcome r = run(train() + " --out " + out.string() +
+                        " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("120/120"), std::string::npos) << r.output;  // plain progress lines in a pipe
   nlohmann::json metrics;

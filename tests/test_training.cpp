@@ -1,5 +1,6 @@
 // Short training runs on a scene with known ground truth.
 #include <gtest/gtest.h>
+#include <omp.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -26,6 +27,28 @@ TrainConfig short_config(int64_t iterations) {
   c.random_background = false;
   c.distractors.enabled = false;  // the static Splatfacto baseline; DeSplat: test_distractors.cpp
   return c;
+}
+
+TEST(Training, ThreadsSettingLimitsEveryParallelLoop) {
+  // The rasterizer takes the count explicitly; Adam, the loss and the initialization use
+  // OpenMP's default team, which must follow config.threads too (a --threads 1 run next to
+  // another job would otherwise start a second thread and spin in it).
+  const TrainingData data = synthetic_training_data(8, 32, 24, 5);
+  TrainConfig c = short_config(2);
+  c.num_downscales = 0;
+  omp_set_num_threads(2);
+  c.threads = 1;
+  Trainer trainer(data, c);
+  trainer.step();
+  EXPECT_EQ(omp_get_max_threads(), 1);
+  int team = 0;
+#pragma omp parallel
+  {
+#pragma omp single
+    team = omp_get_num_threads();
+  }
+  EXPECT_EQ(team, 1);
+  omp_set_num_threads(2);  // leave the default as other tests expect it
 }
 
 TEST(Training, LossFallsAndHeldOutPsnrClearsFloor) {

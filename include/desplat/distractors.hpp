@@ -15,7 +15,13 @@ namespace desplat {
 
 struct DistractorSettings {
   bool enabled = true;          // false: the static-only baseline (Splatfacto)
-  int initial_count = 1000;     // K per training view
+  // K per training view (§5): initial_count distractors for an image of reference_pixels
+  // pixels (the paper's 504×378, RobustNeRF at 1/8), scaled with each view's pixel count
+  // so the distractors cover the image as densely as the authors'. Their capacity is per
+  // image: 1,000 on a 64×117 view is one per 7 pixels, enough to memorize it and take the
+  // static scene away (README, "Distractor density"). reference_pixels = 0: K = initial_count.
+  int initial_count = 1000;
+  int reference_pixels = 504 * 378;
   float init_depth = 0.02f;     // ρ: the plane's depth in camera coordinates [normalized units]
   float init_half_width = 0.01f;// x, y ~ U(−w, w) on that plane [normalized units]
   float init_opacity = 0.1f;
@@ -29,9 +35,13 @@ struct DistractorSettings {
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
 };
 
-// K distractors for one view (§5): camera coordinates x, y ~ U(−w, w), z = ρ, mapped to
-// the world with the view's pose; log-scale = log(mean distance to the 3 nearest others
-// in the set); uniformly random unit quaternion; the initial opacity; RGB ~ U(0, 1).
+// K for a view of this camera's size: initial_count scaled by pixels / reference_pixels
+// (rounded, at least 1 unless initial_count is 0), or initial_count when reference_pixels is 0.
+int distractor_count_for(const Camera& camera, const DistractorSettings& settings);
+
+// distractor_count_for(camera) distractors for one view (§5): camera coordinates
+// x, y ~ U(−w, w), z = ρ, mapped to the world with the view's pose; log-scale = log(mean
+// distance to the 3 nearest others in the set); uniformly random unit quaternion; the initial opacity; RGB ~ U(0, 1).
 // Deterministic for a seed. Returns ColorMode::RGB Gaussians.
 GaussianSet init_distractors(const Camera& camera, const DistractorSettings& settings, uint64_t seed);
 

@@ -55,7 +55,9 @@ struct TrainConfig {
   int random_init_points = 50000;  // used when the scene has no points
   float random_init_extent = 1.0f; // half-width of the cube for random initialization
   uint64_t seed = 0;
-  int threads = 0;                 // 0: all cores
+  // 0: all cores. > 0 also becomes the calling thread's OpenMP default team size, so the
+  // optimizer, loss and initialization honour it as the rasterizer does.
+  int threads = 0;
 };
 
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the

@@ -34,8 +34,9 @@ struct TrainingRunOptions {
   std::optional<uint64_t> seed;
   std::optional<int> threads;
   bool static_only = false;  // the Splatfacto baseline: no distractors
-  // Ablation switches (override the config file): distractors.initial_count,
-  // distractors.density_control = false, distractors.regularize = false.
+  // Ablation switches (override the config file): distractors.initial_count with
+  // reference_pixels = 0 (exactly that many per view), distractors.density_control = false,
+  // distractors.regularize = false.
   std::optional<int> distractors_per_view;
   bool no_distractor_density = false;
   bool no_regularization = false;

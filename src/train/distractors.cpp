@@ -1,6 +1,7 @@
 // Initialization and per-view density control of distractor Gaussians.
 #include "desplat/distractors.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -9,14 +10,21 @@
 
 namespace desplat {
 
+int distractor_count_for(const Camera& cam, const DistractorSettings& s) {
+  if (s.initial_count < 0 || s.reference_pixels < 0)
+    throw std::invalid_argument("distractors: initial_count and reference_pixels must be ≥ 0");
+  if (s.reference_pixels == 0 || s.initial_count == 0) return s.initial_count;
+  const double pixels = double(cam.width) * double(cam.height);
+  return int(std::max<long>(1, std::lround(s.initial_count * pixels / s.reference_pixels)));
+}
+
 GaussianSet init_distractors(const Camera& cam, const DistractorSettings& s, uint64_t seed) {
-  if (s.initial_count < 0) throw std::invalid_argument("distractors: initial_count must be ≥ 0");
   if (!(s.init_depth > 0) || !(s.init_half_width > 0) || !(s.init_opacity > 0 && s.init_opacity < 1))
     throw std::invalid_argument("distractors: init_depth and init_half_width must be > 0, init_opacity in (0, 1)");
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<float> plane(-s.init_half_width, s.init_half_width), unit(0.0f, 1.0f);
   std::normal_distribution<float> normal(0.0f, 1.0f);
-  const size_t n = size_t(s.initial_count);
+  const size_t n = size_t(distractor_count_for(cam, s));
   std::vector<std::array<float, 3>> world(n);
   for (size_t i = 0; i < n; ++i) {
     const double pc[3] = {plane(rng), plane(rng), s.init_depth};

@@ -47,6 +47,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.cull_screen_size", &c.densify.cull_screen_size},
       {"distractors.enabled", &c.distractors.enabled},
       {"distractors.initial_count", &c.distractors.initial_count},
+      {"distractors.reference_pixels", &c.distractors.reference_pixels},
       {"distractors.init_depth", &c.distractors.init_depth},
       {"distractors.init_half_width", &c.distractors.init_half_width},
       {"distractors.init_opacity", &c.distractors.init_opacity},
@@ -114,7 +115,8 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
   }
   if (base.iterations < 1) throw std::invalid_argument("config: iterations must be at least 1");
   if (base.sh_degree < 0 || base.sh_degree > 3) throw std::invalid_argument("config: sh_degree must be 0..3");
-  if (base.distractors.initial_count < 0) throw std::invalid_argument("config: distractors.initial_count must be ≥ 0");
+  if (base.distractors.initial_count < 0 || base.distractors.reference_pixels < 0)
+    throw std::invalid_argument("config: distractors.initial_count and distractors.reference_pixels must be ≥ 0");
   if (base.distractors.refine_every_epochs < 1)
     throw std::invalid_argument("config: distractors.refine_every_epochs must be at least 1");
   if (!(base.distractors.lambda_static >= 0) || !(base.distractors.lambda_distractor >= 0))

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numeric>
+#include <omp.h>
 #include <stdexcept>
 
 #include "desplat/init.hpp"
@@ -62,6 +63,9 @@ FloatImage downscale_image(const FloatImage& img, int factor) {
 
 Trainer::Trainer(const TrainingData& data, TrainConfig config)
     : data_(data), config_(std::move(config)), rng_(config_.seed) {
+  // Adam, the loss and the initialization are plain `omp parallel` loops: without this a
+  // --threads 1 run would still start a team per core (and spin in it).
+  if (config_.threads > 0) omp_set_num_threads(config_.threads);
   if (data_.train.empty()) throw std::invalid_argument("training needs at least one training view");
   for (const TrainView& v : data_.train) {
     v.camera.validate();

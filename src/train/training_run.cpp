@@ -190,7 +190,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.threads) config.threads = *opt.threads;
   if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   if (opt.static_only) config.distractors.enabled = false;
-  if (opt.distractors_per_view) config.distractors.initial_count = *opt.distractors_per_view;
+  if (opt.distractors_per_view) {
+    config.distractors.initial_count = *opt.distractors_per_view;
+    config.distractors.reference_pixels = 0;  // exactly that many, whatever the image size
+  }
   if (opt.no_distractor_density) config.distractors.density_control = false;
   if (opt.no_regularization) config.distractors.regularize = false;
 
@@ -203,7 +206,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
   if (config.distractors.enabled)
-    std::printf("DeSplat: %d distractor Gaussians per training view%s%s\n", config.distractors.initial_count,
+    std::printf("DeSplat: %d distractor Gaussians per training view%s%s\n",
+                data.train.empty() ? 0 : distractor_count_for(data.train[0].camera, config.distractors),
                 config.distractors.density_control ? "" : ", no distractor density control",
                 config.distractors.regularize ? "" : ", no opacity regularizers");
   else
