@@ -21,6 +21,9 @@ int main(int argc, char** argv) {
   app.add_option("--coverage-min", o.coverage_min, "least share of an occluded view's pixels covered")->capture_default_str();
   app.add_option("--coverage-max", o.coverage_max, "largest share of an occluded view's pixels covered (<= 0.6)")
       ->capture_default_str();
+  app.add_option("--track", o.track_length,
+                 "runs of N consecutive training views share one set of occluders (something that stays in frame)")
+      ->capture_default_str();
   app.add_flag("--overwrite", o.overwrite, "replace a scene already written to --out");
   std::string split_rule = "every-nth";
   app.add_option("--split", split_rule, "train/test split: every-nth, all-train, lists, robustnerf, onthego, phototourism")

@@ -1,20 +1,21 @@
 // DeSplat on real photos with known distractors, small and fast: the fox capture with
-// occluders pasted into half of its training views (desplat_occlude's recipe, as
-// data/synthetic/make_fox_occluded.sh), trained at 1/8 resolution for 2,000 steps, once as
-// DeSplat with its defaults and once --static-only. The independent expectations are the
-// pasted masks and the clean held-out photos.
+// occluders pasted into about half of its training views (desplat_occlude's recipe, as
+// data/synthetic/make_fox_occluded.sh with --track 4: each set of occluders stays in the frame
+// for 4 consecutive training views, as a hand or a passer-by would), trained at 1/8 resolution
+// for 2,000 steps, once as DeSplat with its defaults and once --static-only. The independent
+// expectations are the pasted masks and the clean held-out photos.
 //
-// What is asserted: the distractor masks match the occluders, clean views stay clean, and
-// the static layer scores a higher test SSIM than the baseline trained on the same occluded
-// photos. Test PSNR is printed, not asserted: with the paper's distractor density it is
-// level with the baseline here (README, "Distractor density"), not above it, which is why
-// the issue that asks for the PSNR direction stays open.
+// What is asserted: the static layer scores a higher test PSNR and SSIM than the baseline
+// trained on the same occluded photos, the distractor masks match the occluders, and clean
+// views stay clean. (With occluders drawn independently for every view the baseline loses
+// only ~0.6 dB to them and DeSplat is level with it; README, "DeSplat on real photos".)
 #include <gtest/gtest.h>
 
 #include <cstdio>
 
 #include "desplat/mask_metrics.hpp"
 #include "desplat/occluders.hpp"
+#include "desplat/synth.hpp"
 #include "desplat/training_run.hpp"
 
 namespace desplat {
@@ -29,13 +30,13 @@ double mean_of(const std::vector<ViewMetrics>& v, double ViewMetrics::*field) {
   return s / double(v.size());
 }
 
-TEST(DeSplatEvidence, OccludedFoxMasksMatchTheOccludersAndTheStaticLayerBeatsTheBaselineInSsim) {
+TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccluders) {
   const fs::path dir = fs::temp_directory_path() / ("desplat_evidence_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   OccludeOptions o;
   o.data_dir = kFox;
   o.out_dir = dir / "fox_occluded";
-  o.fraction = 0.5, o.seed = 1, o.coverage_min = 0.05, o.coverage_max = 0.25;
+  o.fraction = 0.5, o.seed = 1, o.coverage_min = 0.05, o.coverage_max = 0.25, o.track_length = 4;
   occlude_scene(o);
 
   SceneOptions so;
@@ -55,24 +56,69 @@ TEST(DeSplatEvidence, OccludedFoxMasksMatchTheOccludersAndTheStaticLayerBeatsThe
   while (baseline.current_step() < config.iterations) baseline.step();
 
   const std::vector<ViewMetrics> ours = desplat.evaluate(data.test), theirs = baseline.evaluate(data.test);
+  const double psnr_ours = mean_of(ours, &ViewMetrics::psnr), psnr_theirs = mean_of(theirs, &ViewMetrics::psnr);
   const double ssim_ours = mean_of(ours, &ViewMetrics::ssim), ssim_theirs = mean_of(theirs, &ViewMetrics::ssim);
-  std::printf("test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n",
-              mean_of(ours, &ViewMetrics::psnr), ssim_ours, mean_of(theirs, &ViewMetrics::psnr), ssim_theirs);
+  std::printf("test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n", psnr_ours,
+              ssim_ours, psnr_theirs, ssim_theirs);
+  // The direction only, no margin: the measured gap (README) is what the claim rests on.
+  EXPECT_GT(psnr_ours, psnr_theirs);
   EXPECT_GT(ssim_ours, ssim_theirs);
 
   // Masks: A_d > 0.5 against the pasted occluders.
   const MaskMetrics masks = evaluate_distractor_masks(desplat, occluded);
-  ASSERT_EQ(masks.occluded_views, 22);
-  ASSERT_EQ(masks.clean_views, 21);
+  ASSERT_EQ(masks.occluded_views, 20);  // 5 tracks of 4: round(0.5 · 43 / 4) = 5
+  ASSERT_EQ(masks.clean_views, 23);
   std::printf("mean mask IoU %.3f over %d occluded views; clean-view false positives %.4f\n", masks.mean_iou,
               masks.occluded_views, masks.mean_clean_view_false_positive);
   // Floor 0.5: predicting every pixel as distractor scores at most the covered share (≤ 0.25
   // here), predicting none scores 0; above 0.5 the predicted and pasted regions agree on more
-  // than they disagree, on average over the 22 views.
+  // than they disagree, on average over the 20 views.
   EXPECT_GT(masks.mean_iou, 0.5);
   // Clean views: a distractor layer that had taken over the static scene would flag much of
   // the image; allow 1 % (stray splats at edges and in regions few views see).
   EXPECT_LT(masks.mean_clean_view_false_positive, 0.01);
+
+  fs::remove_all(dir);
+}
+
+// The same comparison on the tiny synthetic scene with known ground truth (issue 6):
+// data/synthetic/tiny_tracks.json, 80×60, 21 training views all cluttered with 1–2 objects
+// that stay in the frame for 4 consecutive views, 3 clean test views, 2,000 steps.
+TEST(DeSplatEvidence, TinySyntheticSceneStaticLayerBeatsTheBaselineAndMasksMatch) {
+  const fs::path dir = fs::temp_directory_path() / ("desplat_evidence_tiny_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  synth::GenerateOptions g;
+  g.out = dir / "scene";
+  synth::generate_scene(synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_tracks.json"), g);
+  const Scene scene = load_colmap_scene(g.out, SceneOptions{});
+  const TrainingData data = load_training_data(scene);
+  ASSERT_EQ(data.train.size(), 21u);
+  ASSERT_EQ(data.test.size(), 3u);
+
+  TrainConfig config;
+  config.iterations = 2000;
+  config.num_downscales = 0;  // the schedule would keep a 2,000-step run below full resolution
+  Trainer desplat(data, config);
+  while (desplat.current_step() < config.iterations) desplat.step();
+  config.distractors.enabled = false;
+  Trainer baseline(data, config);
+  while (baseline.current_step() < config.iterations) baseline.step();
+
+  const std::vector<ViewMetrics> ours = desplat.evaluate(data.test), theirs = baseline.evaluate(data.test);
+  const double psnr_ours = mean_of(ours, &ViewMetrics::psnr), psnr_theirs = mean_of(theirs, &ViewMetrics::psnr);
+  std::printf("tiny scene test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n",
+              psnr_ours, mean_of(ours, &ViewMetrics::ssim), psnr_theirs, mean_of(theirs, &ViewMetrics::ssim));
+  EXPECT_GT(psnr_ours, psnr_theirs);
+
+  const MaskMetrics masks = evaluate_distractor_masks(desplat, scene);
+  ASSERT_EQ(masks.occluded_views, 21);
+  double covered = 0;
+  for (const ViewMaskMetrics& v : masks.views) covered += v.score.truth_fraction / double(masks.views.size());
+  std::printf("mean mask IoU %.3f; distractors cover %.1f %% of a training view on average\n", masks.mean_iou,
+              100 * covered);
+  // Floor 0.5 as above; it means something only while marking every pixel would score less.
+  ASSERT_LT(covered, 0.5);
+  EXPECT_GT(masks.mean_iou, 0.5);
 
   fs::remove_all(dir);
 }

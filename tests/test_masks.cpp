@@ -549,6 +549,57 @@ TEST(OccludeScene, SameSeedSameFilesOtherSeedOtherOccluders) {
   EXPECT_NE(slurp(dir.path / "a/occluders.json"), slurp(dir.path / "c/occluders.json"));
 }
 
+// Tracks: the training views, in name order, cut into runs of 4; a run is occluded whole or
+// not at all, round(0.5 · 43 / 4) = 5 runs are, and every view of a run carries the same
+// occluders and the same mask, with patches cut only from photos outside the run.
+TEST(OccludeScene, TracksShareOccludersOverConsecutiveTrainingViews) {
+  TempDir dir("tracks");
+  OccludeOptions o = fox_options(dir.path / "out");
+  o.fraction = 0.5;
+  o.track_length = 4;
+  const OccludeReport report = occlude_scene(o);
+  std::vector<const OccludedView*> train;
+  for (const OccludedView& v : report.views)
+    if (!fox_is_test().at(v.name)) train.push_back(&v);
+  ASSERT_EQ(train.size(), 43u);
+  int occluded_runs = 0;
+  for (size_t first = 0; first < train.size(); first += 4) {
+    const size_t end = std::min(first + 4, train.size());
+    const OccludedView& a = *train[first];
+    occluded_runs += a.occluded;
+    const std::string mask_a = slurp(distractor_mask_path(o.out_dir, a.name));
+    std::set<std::string> run_names;
+    for (size_t i = first; i < end; ++i) run_names.insert(train[i]->name);
+    for (size_t i = first; i < end; ++i) {
+      const OccludedView& b = *train[i];
+      ASSERT_EQ(b.occluded, a.occluded) << b.name;
+      EXPECT_EQ(slurp(distractor_mask_path(o.out_dir, b.name)), mask_a) << b.name;
+      ASSERT_EQ(b.occluders.size(), a.occluders.size()) << b.name;
+      for (size_t k = 0; k < b.occluders.size(); ++k) {
+        EXPECT_EQ(b.occluders[k].kind, a.occluders[k].kind);
+        EXPECT_EQ(b.occluders[k].box, a.occluders[k].box);
+        EXPECT_EQ(b.occluders[k].color, a.occluders[k].color);
+        EXPECT_EQ(b.occluders[k].source_image, a.occluders[k].source_image);
+        EXPECT_EQ(run_names.count(b.occluders[k].source_image), 0u) << b.name << " pastes from its own run";
+      }
+      if (b.occluded) {
+        EXPECT_GT(b.covered_fraction, 0.0);
+      }
+    }
+  }
+  EXPECT_EQ(occluded_runs, 5);
+
+  // Runs of one are the independent views of the default.
+  OccludeOptions one = fox_options(dir.path / "one");
+  one.track_length = 1;
+  OccludeOptions def = fox_options(dir.path / "default");
+  const OccludeReport r1 = occlude_scene(one), r0 = occlude_scene(def);
+  for (size_t i = 0; i < r0.views.size(); ++i) {
+    EXPECT_EQ(r1.views[i].occluded, r0.views[i].occluded);
+    EXPECT_EQ(slurp(dir.path / "one/images" / r1.views[i].name), slurp(dir.path / "default/images" / r0.views[i].name));
+  }
+}
+
 TEST(OccludeScene, BadInputGivesOneClearError) {
   TempDir dir("errors");
   const auto error = [](const OccludeOptions& o) { return error_of<OccludeError>([&] { occlude_scene(o); }); };
@@ -559,6 +610,9 @@ TEST(OccludeScene, BadInputGivesOneClearError) {
   o.coverage_min = 0.3;
   o.coverage_max = 0.2;
   EXPECT_CONTAINS(error(o), "--coverage-min");
+  o = fox_options(dir.path / "out");
+  o.track_length = 0;
+  EXPECT_CONTAINS(error(o), "--track");
   o = fox_options(kFox / "occluded");
   EXPECT_CONTAINS(error(o), "must not be the input folder");
   o = fox_options(kFox);

@@ -326,6 +326,37 @@ TEST(Synth, MasksAreNonEmptyExactlyInTheClutteredTrainingViews) {
   }
 }
 
+// Tracks: runs of 3 consecutive training views (0001–0003, 0004–0006, 0007 0009 0010, …) show
+// the same objects at the same place in the frame, so their masks agree; the next run draws
+// new objects. One sample per pixel, and nothing static stands between these cameras and their
+// distractors, so within a run the masks should agree but for rounding at the silhouettes.
+TEST(Synth, DistractorTracksRepeatTheSameObjectsInTheFrameForConsecutiveTrainingViews) {
+  TempDir t;
+  generate(tiny("tiny_distractors.json", {{"distractors.clutter_ratio", 1.0}, {"distractors.track_length", 3},
+                                          {"supersampling", 1}, {"points.count", 0}}),
+           t.path / "s");
+  std::vector<FloatImage> masks;
+  for (int k = 0; k < 16; ++k)
+    if (k % 8 != 0) masks.push_back(read_image_rgb(t.path / "s" / "distractor_masks" / synth::view_name(k, 16)));
+  ASSERT_EQ(masks.size(), 14u);
+  const auto iou = [](const FloatImage& a, const FloatImage& b) {
+    double both = 0, either = 0;
+    for (size_t i = 0; i < a.pixels.size(); i += 3) {
+      const bool x = a.pixels[i] > 0.5f, y = b.pixels[i] > 0.5f;
+      both += x && y, either += x || y;
+    }
+    return either > 0 ? both / either : 1.0;
+  };
+  for (size_t j = 0; j < masks.size(); ++j) {
+    ASSERT_TRUE(any_nonzero(masks[j])) << j;
+    if (j % 3 != 0) {
+      EXPECT_GT(iou(masks[j], masks[j - j % 3]), 0.9) << "training view " << j << " left its track";
+    } else if (j > 0) {
+      EXPECT_LT(iou(masks[j], masks[j - 3]), 0.5) << "training view " << j << " repeats the last track";
+    }
+  }
+}
+
 TEST(Synth, WithOneSamplePerPixelTheMaskIsExactlyWhereThePhotoShowsADistractor) {
   TempDir t;
   const auto report = generate(tiny("tiny_distractors.json", {{"supersampling", 1}, {"points.count", 0}}), t.path / "s");

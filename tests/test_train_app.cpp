@@ -50,6 +50,10 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
                         " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("120/120"), std::string::npos) << r.output;  // plain progress lines in a pipe
+  // 120 steps end inside the default resolution schedule (full resolution from step 6,000).
+  EXPECT_NE(r.output.find("never trains at full resolution (the resolution schedule reaches it at step 6000 of 120)"),
+            std::string::npos)
+      << r.output;
   nlohmann::json metrics;
   std::ifstream(out / "metrics.json") >> metrics;
   EXPECT_EQ(metrics["step"], 120);

@@ -5,7 +5,9 @@
 #
 #   data/synthetic/make_fox_occluded.sh [OUT_DIR] [more desplat_occlude options, e.g. --overwrite]
 #
-# OUT_DIR defaults to out/fox_occluded (relative to the repository root). Train on it with
+# OUT_DIR defaults to out/fox_occluded (relative to the repository root). `--track 4` keeps each
+# set of occluders in the frame for 4 consecutive training views (the scene of
+# tests/test_desplat_evidence.cpp). Train on it with
 #   build/release/apps/desplat_train --data out/fox_occluded --downscale 4 --out out/fox_occluded_run
 set -euo pipefail
 root="$(cd "$(dirname "$0")/../.." && pwd)"

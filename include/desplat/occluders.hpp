@@ -31,6 +31,7 @@ struct OccludeOptions {
   uint64_t seed = 1;
   double coverage_min = 0.05;      // covered share of an occluded view's pixels: 0 < min ≤ max ≤ 0.6
   double coverage_max = 0.25;
+  int track_length = 1;            // consecutive training views that share one set of occluders, ≥ 1
   SplitOptions split;              // which views are training views (default: every 8th is a test view)
   bool overwrite = false;          // replace images/, sparse/, distractor_masks/, occluders.json in out_dir
 };
@@ -64,7 +65,12 @@ struct OccludeReport {
 // distractor_masks/ for every training view (8-bit grey, 255 where an occluder was pasted,
 // all 0 for untouched views; none for test views) and occluders.json (the report).
 // round(fraction · #train) training views, chosen from the seed, get 1–3 occluders whose union
-// covers [coverage_min, coverage_max] of the image. Same inputs and seed give identical files.
+// covers [coverage_min, coverage_max] of the image. With track_length L > 1 the training views
+// (sorted by name) are cut into runs of L consecutive views, round(fraction · #train / L) runs
+// are chosen, and every view of a run gets the same occluders at the same pixels (photos of the
+// same size; a run's photos of another size draw their own): something
+// that stays in the frame while the camera moves (a thumb on the lens, a person walking along),
+// which no single 3D position explains. Same inputs and seed give identical files.
 // images_N/ folders of the input are not copied (they would show the unoccluded photos).
 // Throws OccludeError naming the file or option on bad input (missing/unreadable files, a bad
 // model or split, out_dir inside data_dir, out_dir already holding a scene without overwrite,

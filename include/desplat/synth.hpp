@@ -134,6 +134,9 @@ struct DistractorSpec {  // per-view objects in front of the static scene, train
   std::array<double, 2> size{0.15, 0.35};    // object diameter as a fraction of the image height
   std::array<double, 2> depth{0.3, 0.55};    // distance from the camera as a fraction of its
                                              // distance to views.target
+  int track_length = 1;  // runs of this many consecutive training views show the same objects at
+                         // the same place in the frame (they move with the camera, as a hand or a
+                         // strap would), which no single 3D position explains; 1 = independent views
   friend bool operator==(const DistractorSpec&, const DistractorSpec&) = default;
 };
 

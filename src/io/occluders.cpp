@@ -172,7 +172,7 @@ struct Placed {
 
 // One occluder of about `area` pixels inside a W×H image; nullopt when a patch finds no
 // source place that does not overlap its destination.
-std::optional<Placed> place_occluder(Random& rng, int W, int H, double area, const std::string& self,
+std::optional<Placed> place_occluder(Random& rng, int W, int H, double area, const std::vector<std::string>& targets,
                                      const std::vector<std::string>& names, const std::map<std::string, Size>& sizes) {
   Placed p;
   p.occluder.kind = kKinds[rng.index(5)];
@@ -205,11 +205,12 @@ std::optional<Placed> place_occluder(Random& rng, int W, int H, double area, con
     for (auto& c : p.occluder.color) c = uint8_t(rng.integer(0, 255));
     return p;
   }
-  // Patch: another photo's pixels from a place that does not overlap the destination, so
-  // the pasted content is visibly out of place.
+  // Patch: pixels of a photo that is not one of the targets, from a place that does not
+  // overlap the destination, so the pasted content is visibly out of place.
+  if (targets.size() >= names.size()) return std::nullopt;  // no other photo to cut from
   std::string source;
   do source = names[rng.index(names.size())];
-  while (source == self);
+  while (std::find(targets.begin(), targets.end(), source) != targets.end());
   const Size& s = sizes.at(source);
   if (w > s.width || h > s.height) return std::nullopt;
   const Box dest{x0, y0, x0 + w, y0 + h};
@@ -224,9 +225,11 @@ std::optional<Placed> place_occluder(Random& rng, int W, int H, double area, con
   return std::nullopt;
 }
 
-// 1–3 occluders whose union covers [min, max] of the image (redrawn until it does).
-std::vector<Placed> place_occluders(Random& rng, int W, int H, const OccludeOptions& o, const std::string& self,
-                                    const std::vector<std::string>& names, const std::map<std::string, Size>& sizes) {
+// 1–3 occluders whose union covers [min, max] of the image (redrawn until it does), for the
+// views `targets` (one track; targets[0] names it in errors).
+std::vector<Placed> place_occluders(Random& rng, int W, int H, const OccludeOptions& o,
+                                    const std::vector<std::string>& targets, const std::vector<std::string>& names,
+                                    const std::map<std::string, Size>& sizes) {
   const double pixels = double(W) * H;
   for (int attempt = 0; attempt < 1000; ++attempt) {
     const int count = rng.integer(1, 3);
@@ -234,7 +237,7 @@ std::vector<Placed> place_occluders(Random& rng, int W, int H, const OccludeOpti
     std::vector<Placed> placed;
     cv::Mat covered = cv::Mat::zeros(H, W, CV_8U);
     for (int i = 0; i < count; ++i) {
-      auto p = place_occluder(rng, W, H, target * pixels / count, self, names, sizes);
+      auto p = place_occluder(rng, W, H, target * pixels / count, targets, names, sizes);
       if (!p) break;
       covered |= p->footprint;
       placed.push_back(std::move(*p));
@@ -242,7 +245,7 @@ std::vector<Placed> place_occluders(Random& rng, int W, int H, const OccludeOpti
     const double share = cv::countNonZero(covered) / pixels;
     if (int(placed.size()) == count && share >= o.coverage_min && share <= o.coverage_max) return placed;
   }
-  throw OccludeError(self + ": found no occluders covering " + number_text(o.coverage_min) + "–" +
+  throw OccludeError(targets[0] + ": found no occluders covering " + number_text(o.coverage_min) + "–" +
                      number_text(o.coverage_max) + " of a " + size_text(W, H) + " image");
 }
 
@@ -280,6 +283,7 @@ cv::Mat paint(Photo& photo, const std::vector<Placed>& placed, const fs::path& i
 void check_options(const OccludeOptions& o) {
   if (!(o.fraction >= 0 && o.fraction <= 1))
     throw OccludeError("--fraction must be in [0, 1], got " + number_text(o.fraction));
+  if (o.track_length < 1) throw OccludeError("--track must be at least 1, got " + std::to_string(o.track_length));
   if (!(o.coverage_min > 0 && o.coverage_min <= o.coverage_max && o.coverage_max <= 0.6))
     throw OccludeError("coverage must satisfy 0 < --coverage-min <= --coverage-max <= 0.6, got " +
                        number_text(o.coverage_min) + " and " + number_text(o.coverage_max));
@@ -314,13 +318,18 @@ void copy_bytes(const fs::path& from, const fs::path& to) {
   if (ec) throw OccludeError(to.string() + ": cannot copy " + from.string() + ": " + ec.message());
 }
 
-std::vector<size_t> chosen_views(const std::vector<size_t>& train, double fraction, uint64_t seed) {
-  std::vector<size_t> order = train;
+// The chosen tracks: runs of `length` consecutive training views (the last may be shorter),
+// round(fraction · #train / length) of them picked from the seed, sorted by first view.
+std::vector<std::vector<size_t>> chosen_tracks(const std::vector<size_t>& train, double fraction, int length,
+                                               uint64_t seed) {
+  std::vector<std::vector<size_t>> runs;
+  for (size_t i = 0; i < train.size(); i += size_t(length))
+    runs.emplace_back(train.begin() + long(i), train.begin() + long(std::min(i + size_t(length), train.size())));
   Random rng(view_seed(seed, "desplat_occlude: chosen views"));
-  for (size_t i = order.size(); i > 1; --i) std::swap(order[i - 1], order[rng.index(i)]);  // Fisher–Yates
-  order.resize(size_t(std::lround(fraction * double(train.size()))));
-  std::sort(order.begin(), order.end());
-  return order;
+  for (size_t i = runs.size(); i > 1; --i) std::swap(runs[i - 1], runs[rng.index(i)]);  // Fisher–Yates
+  runs.resize(std::min(runs.size(), size_t(std::lround(fraction * double(train.size()) / length))));
+  std::sort(runs.begin(), runs.end());
+  return runs;
 }
 
 const char* role_name(ViewRole r) { return r == ViewRole::Train ? "train" : r == ViewRole::Test ? "test" : "unused"; }
@@ -348,7 +357,7 @@ nlohmann::json report_json(const OccludeOptions& o, const fs::path& data, const 
     views.push_back(j);
   }
   return {{"data", data.string()},  {"seed", o.seed},
-          {"fraction", o.fraction}, {"coverage", {o.coverage_min, o.coverage_max}},
+          {"fraction", o.fraction}, {"coverage", {o.coverage_min, o.coverage_max}}, {"track_length", o.track_length},
           {"box_convention", "[x0, y0, x1, y1) pixels"}, {"views", views}};
 }
 
@@ -391,8 +400,11 @@ Capture read_capture(const fs::path& data, const SplitOptions& split) {
 }
 
 // Writes the view's image (a byte copy unless occluded) and, for a training view, its mask.
-OccludedView write_view(const Capture& c, size_t i, bool occlude, const OccludeOptions& o, const fs::path& out) {
+// `track` is the run of views the view shares its occluders with (empty: not occluded).
+OccludedView write_view(const Capture& c, size_t i, const std::vector<size_t>& track, const OccludeOptions& o,
+                        const fs::path& out) {
   const std::string& name = c.names[i];
+  const bool occlude = !track.empty();
   OccludedView v{name, c.roles[i], occlude, 0, {}};
   const Size s = c.sizes.at(name);
   cv::Mat mask = cv::Mat::zeros(s.height, s.width, CV_8U);
@@ -400,8 +412,11 @@ OccludedView write_view(const Capture& c, size_t i, bool occlude, const OccludeO
     if (s.width < 16 || s.height < 16)
       throw OccludeError((c.images / name).string() + ": image is " + size_text(s.width, s.height) +
                          " px, too small for occluders (16x16 at least)");
-    Random rng(view_seed(o.seed, name));
-    const std::vector<Placed> placed = place_occluders(rng, s.width, s.height, o, name, c.names, c.sizes);
+    // Seeded by the track's first view: the same draws, so the same occluders, in every view of it.
+    std::vector<std::string> targets;
+    for (size_t t : track) targets.push_back(c.names[t]);
+    Random rng(view_seed(o.seed, targets[0]));
+    const std::vector<Placed> placed = place_occluders(rng, s.width, s.height, o, targets, c.names, c.sizes);
     Photo photo = read_photo(c.images / name);
     mask = paint(photo, placed, c.images);
     make_dirs((out / "images" / name).parent_path());
@@ -427,7 +442,9 @@ OccludeReport occlude_scene(const OccludeOptions& o) {
   std::vector<size_t> train;
   for (size_t i = 0; i < c.names.size(); ++i)
     if (c.roles[i] == ViewRole::Train) train.push_back(i);
-  const std::vector<size_t> chosen = chosen_views(train, o.fraction, o.seed);
+  std::map<size_t, std::vector<size_t>> track_of;  // occluded view -> its track
+  for (const std::vector<size_t>& track : chosen_tracks(train, o.fraction, o.track_length, o.seed))
+    for (size_t i : track) track_of[i] = track;
   remove_previous_output(out);  // nothing there unless overwrite (check_output_place)
 
   std::error_code ec;
@@ -436,8 +453,10 @@ OccludeReport occlude_scene(const OccludeOptions& o) {
   if (ec) throw OccludeError(c.sparse.string() + ": cannot list: " + ec.message());
 
   OccludeReport report;
-  for (size_t i = 0; i < c.names.size(); ++i)
-    report.views.push_back(write_view(c, i, std::binary_search(chosen.begin(), chosen.end(), i), o, out));
+  for (size_t i = 0; i < c.names.size(); ++i) {
+    const auto it = track_of.find(i);
+    report.views.push_back(write_view(c, i, it == track_of.end() ? std::vector<size_t>{} : it->second, o, out));
+  }
 
   const fs::path json_path = out / "occluders.json";
   std::ofstream json(json_path);

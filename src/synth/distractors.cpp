@@ -65,9 +65,10 @@ std::vector<Primitive> make_distractors(const DistractorSpec& spec, const ViewPo
     o.texture.scale = rng.uniform(3, 6) / diameter;  // a few pattern cells across the object
     o.texture.detail = 0.2;
     Primitive p = make_primitive(o);
-    // Any orientation: a uniformly random rotation from a normalized Gaussian quaternion.
+    // Any orientation: a uniformly random rotation from a normalized Gaussian quaternion, taken
+    // in the camera's frame so that views drawing the same stream see the same silhouette.
     const Eigen::Quaterniond q(rng.normal(), rng.normal(), rng.normal(), rng.normal());
-    p.to_local = q.normalized().toRotationMatrix();
+    p.to_local = q.normalized().toRotationMatrix() * pose.R_cw;
     out.push_back(p);
   }
   return out;

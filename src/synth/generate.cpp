@@ -103,10 +103,14 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
   const int n = d.views.count;
   const std::vector<bool> cluttered = cluttered_views(n, d.distractors.clutter_ratio);
   std::vector<Primitives> distractors(static_cast<size_t>(n));
-  for (int k = 0; k < n; ++k)
+  int train_index = 0, track_first = 0;  // a track's views draw from its first training view's stream
+  for (int k = 0; k < n; ++k) {
+    if (is_test_view(k)) continue;
+    if (train_index++ % d.distractors.track_length == 0) track_first = k;
     if (cluttered[static_cast<size_t>(k)])
-      distractors[static_cast<size_t>(k)] =
-          Primitives(make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, target, d.seed, k), d.world.light);
+      distractors[static_cast<size_t>(k)] = Primitives(
+          make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, target, d.seed, track_first), d.world.light);
+  }
 
   GenerationReport report;
   const bool exposure_on = d.exposure.stops > 0 || d.exposure.white_balance > 0;

@@ -199,7 +199,8 @@ void apply_effects(Description& d, const std::string& section, const json& j, co
                  {{"clutter_ratio", [&](const json& v, const std::string& k) { x.clutter_ratio = number(v, k, s, 0, 1); }},
                   {"per_view", [&](const json& v, const std::string& k) { x.per_view = range_pair<int>(v, k, s, 1, 64); }},
                   {"size", [&](const json& v, const std::string& k) { x.size = range_pair<double>(v, k, s, 0.01, 2); }},
-                  {"depth", [&](const json& v, const std::string& k) { x.depth = range_pair<double>(v, k, s, 0.01, 0.95); }}});
+                  {"depth", [&](const json& v, const std::string& k) { x.depth = range_pair<double>(v, k, s, 0.01, 0.95); }},
+                  {"track_length", [&](const json& v, const std::string& k) { x.track_length = integer(v, k, s, 1, 1000); }}});
   } else if (section == "exposure") {
     auto& e = d.exposure;
     apply_fields(j, section, s,
@@ -363,7 +364,8 @@ json description_to_json(const Description& d) {
           {"sky", {{"enabled", d.sky.enabled}, {"horizon", rgb_json(d.sky.horizon)}, {"zenith", rgb_json(d.sky.zenith)},
                    {"clouds", d.sky.clouds}}},
           {"distractors", {{"clutter_ratio", d.distractors.clutter_ratio}, {"per_view", d.distractors.per_view},
-                           {"size", d.distractors.size}, {"depth", d.distractors.depth}}},
+                           {"size", d.distractors.size}, {"depth", d.distractors.depth},
+                           {"track_length", d.distractors.track_length}}},
           {"exposure", {{"stops", d.exposure.stops}, {"white_balance", d.exposure.white_balance},
                         {"test_views", d.exposure.test_views}}},
           {"noise", {{"sigma", d.noise.sigma}, {"shot", d.noise.shot}, {"test_views", d.noise.test_views}}},

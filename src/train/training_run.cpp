@@ -212,6 +212,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 config.distractors.regularize ? "" : ", no opacity regularizers");
   else
     std::printf("static-only (Splatfacto baseline)\n");
+  // Splatfacto's resolution schedule assumes 30k steps; a short run would silently end on
+  // downscaled images and score poorly at full resolution.
+  const int64_t full_resolution_from = int64_t(config.num_downscales) * config.resolution_schedule;
+  if (full_resolution_from >= config.iterations)
+    std::printf("warning: this run never trains at full resolution (the resolution schedule reaches it at step "
+                "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
+                (long long)full_resolution_from, (long long)config.iterations);
 
   const json run_json = {{"data_dir", fs::absolute(data_dir).string()},
                          {"downscale", opt.downscale},
