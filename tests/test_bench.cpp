@@ -48,6 +48,22 @@ TEST(LinePlot, CurvesLandWhereTheirDataSays) {
   EXPECT_GT(off[2], 0.85f);
 }
 
+TEST(LinePlot, TicksAreRoundNumbersInsideTheAxis) {
+  const std::vector<double> seconds = nice_ticks(-14.75, 661.6);  // the time axis of a bench plot
+  EXPECT_EQ(seconds, (std::vector<double>{0, 100, 200, 300, 400, 500, 600}));
+  const std::vector<double> psnr = nice_ticks(20.85, 27.8);
+  EXPECT_EQ(psnr, (std::vector<double>{21, 22, 23, 24, 25, 26, 27}));
+  const std::vector<double> iou = nice_ticks(-0.041, 0.867);
+  ASSERT_EQ(iou.size(), 5u);  // 0, 0.2, …, 0.8
+  for (size_t i = 0; i < iou.size(); ++i) EXPECT_NEAR(iou[i], 0.2 * double(i), 1e-12);
+  const std::vector<double> narrow = nice_ticks(0.9, 3.1);  // step 0.5: 1, 1.5, …, 3 (0.2 would give 11)
+  ASSERT_EQ(narrow.size(), 5u);
+  EXPECT_DOUBLE_EQ(narrow.front(), 1.0);
+  EXPECT_DOUBLE_EQ(narrow.back(), 3.0);
+  EXPECT_TRUE(nice_ticks(1, 1).empty());
+  EXPECT_TRUE(nice_ticks(0, NAN).empty());
+}
+
 TEST(LinePlot, BadSeriesAreErrors) {
   EXPECT_THROW(draw_line_plot({}, {{"a", {1, 2}, {1}}}), std::invalid_argument);
   EXPECT_THROW(draw_line_plot({}, {{"a", {NAN}, {1}}}), std::invalid_argument);
@@ -131,7 +147,7 @@ TEST(BenchGrid, CheckedInGridsAreValid) {
     EXPECT_FALSE(g.runs.empty()) << entry.path();
     ++grids;
   }
-  EXPECT_EQ(grids, 3);
+  EXPECT_EQ(grids, 4);  // bench_grid, bench_grid_quick, bench_grid_7k_half, clutter_grid
 }
 
 TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <memory>
 
 #include "desplat/mask_metrics.hpp"
 #include "desplat/occluders.hpp"
@@ -28,6 +29,21 @@ double mean_of(const std::vector<ViewMetrics>& v, double ViewMetrics::*field) {
   double s = 0;
   for (const ViewMetrics& m : v) s += m.*field;
   return s / double(v.size());
+}
+
+// DeSplat with `config`, then the same config --static-only, each trained to
+// config.iterations. Held by pointer because a Trainer refers to `data`.
+struct DeSplatAndBaseline {
+  std::unique_ptr<Trainer> desplat, baseline;
+};
+DeSplatAndBaseline train_both(const TrainingData& data, TrainConfig config) {
+  config.distractors.enabled = true;
+  auto desplat = std::make_unique<Trainer>(data, config);
+  while (desplat->current_step() < config.iterations) desplat->step();
+  config.distractors.enabled = false;
+  auto baseline = std::make_unique<Trainer>(data, config);
+  while (baseline->current_step() < config.iterations) baseline->step();
+  return {std::move(desplat), std::move(baseline)};
 }
 
 TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccluders) {
@@ -48,14 +64,11 @@ TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccl
   config.iterations = 2000;
   config.num_downscales = 0;  // train at 1/8 from the start: 2,000 steps at 1/32 would say little
   config.threads = 0;
-  Trainer desplat(data, config);
-  EXPECT_EQ(desplat.distractors()[0].size(), 39u);  // 1,000 · (64·117) / (504·378): the paper's density
-  while (desplat.current_step() < config.iterations) desplat.step();
-  config.distractors.enabled = false;
-  Trainer baseline(data, config);
-  while (baseline.current_step() < config.iterations) baseline.step();
+  // 1,000 · (64·117) / (504·378): the paper's density
+  EXPECT_EQ(Trainer(data, config).distractors()[0].size(), 39u);
+  const auto [desplat, baseline] = train_both(data, config);
 
-  const std::vector<ViewMetrics> ours = desplat.evaluate(data.test), theirs = baseline.evaluate(data.test);
+  const std::vector<ViewMetrics> ours = desplat->evaluate(data.test), theirs = baseline->evaluate(data.test);
   const double psnr_ours = mean_of(ours, &ViewMetrics::psnr), psnr_theirs = mean_of(theirs, &ViewMetrics::psnr);
   const double ssim_ours = mean_of(ours, &ViewMetrics::ssim), ssim_theirs = mean_of(theirs, &ViewMetrics::ssim);
   std::printf("test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n", psnr_ours,
@@ -65,7 +78,7 @@ TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccl
   EXPECT_GT(ssim_ours, ssim_theirs);
 
   // Masks: A_d > 0.5 against the pasted occluders.
-  const MaskMetrics masks = evaluate_distractor_masks(desplat, occluded);
+  const MaskMetrics masks = evaluate_distractor_masks(*desplat, occluded);
   ASSERT_EQ(masks.occluded_views, 20);  // 5 tracks of 4: round(0.5 · 43 / 4) = 5
   ASSERT_EQ(masks.clean_views, 23);
   std::printf("mean mask IoU %.3f over %d occluded views; clean-view false positives %.4f\n", masks.mean_iou,
@@ -98,19 +111,15 @@ TEST(DeSplatEvidence, TinySyntheticSceneStaticLayerBeatsTheBaselineAndMasksMatch
   TrainConfig config;
   config.iterations = 2000;
   config.num_downscales = 0;  // the schedule would keep a 2,000-step run below full resolution
-  Trainer desplat(data, config);
-  while (desplat.current_step() < config.iterations) desplat.step();
-  config.distractors.enabled = false;
-  Trainer baseline(data, config);
-  while (baseline.current_step() < config.iterations) baseline.step();
+  const auto [desplat, baseline] = train_both(data, config);
 
-  const std::vector<ViewMetrics> ours = desplat.evaluate(data.test), theirs = baseline.evaluate(data.test);
+  const std::vector<ViewMetrics> ours = desplat->evaluate(data.test), theirs = baseline->evaluate(data.test);
   const double psnr_ours = mean_of(ours, &ViewMetrics::psnr), psnr_theirs = mean_of(theirs, &ViewMetrics::psnr);
   std::printf("tiny scene test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n",
               psnr_ours, mean_of(ours, &ViewMetrics::ssim), psnr_theirs, mean_of(theirs, &ViewMetrics::ssim));
   EXPECT_GT(psnr_ours, psnr_theirs);
 
-  const MaskMetrics masks = evaluate_distractor_masks(desplat, scene);
+  const MaskMetrics masks = evaluate_distractor_masks(*desplat, scene);
   ASSERT_EQ(masks.occluded_views, 21);
   double covered = 0;
   for (const ViewMaskMetrics& v : masks.views) covered += v.score.truth_fraction / double(masks.views.size());

@@ -29,6 +29,22 @@ TrainConfig short_config(int64_t iterations) {
   return c;
 }
 
+TEST(Training, ResolutionScheduleFollowsSplatfacto) {
+  // Splatfacto's defaults: 1/4 resolution for steps 0–2,999, 1/2 for 3,000–5,999, full from 6,000.
+  const TrainConfig c;
+  EXPECT_EQ(c.downscale_at(0), 4);
+  EXPECT_EQ(c.downscale_at(2999), 4);
+  EXPECT_EQ(c.downscale_at(3000), 2);
+  EXPECT_EQ(c.downscale_at(5999), 2);
+  EXPECT_EQ(c.downscale_at(6000), 1);
+  EXPECT_EQ(c.downscale_at(29999), 1);
+  EXPECT_EQ(c.full_resolution_from(), 6000);
+  TrainConfig none;
+  none.num_downscales = 0;
+  EXPECT_EQ(none.downscale_at(0), 1);
+  EXPECT_EQ(none.full_resolution_from(), 0);
+}
+
 TEST(Training, ThreadsSettingLimitsEveryParallelLoop) {
   // The rasterizer takes the count explicitly; Adam, the loss and the initialization use
   // OpenMP's default team, which must follow config.threads too (a --threads 1 run next to

@@ -42,6 +42,11 @@ PlotFrame plot_frame(const PlotSpec& spec, const std::vector<PlotSeries>& series
 // sizes differ or there is no finite point at all.
 FloatImage draw_line_plot(const PlotSpec& spec, const std::vector<PlotSeries>& series);
 
+// Tick values for an axis spanning [lo, hi]: the multiples of the smallest step of the
+// form 1, 2 or 5 × 10^k that gives at most 8 of them inside the span (at least 2 whenever
+// hi > lo), so labels read 0, 100, 200 rather than -14.75, 120.5.
+std::vector<double> nice_ticks(double lo, double hi);
+
 // The RGB color in [0, 1] of series i (a 10-color palette, repeating).
 std::array<float, 3> plot_color(size_t i);
 

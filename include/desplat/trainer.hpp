@@ -8,6 +8,7 @@
 // Not thread-safe: one Trainer per thread; it uses OpenMP internally.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <random>
@@ -58,6 +59,13 @@ struct TrainConfig {
   // 0: all cores. > 0 also becomes the calling thread's OpenMP default team size, so the
   // optimizer, loss and initialization honour it as the rasterizer does.
   int threads = 0;
+
+  // The resolution schedule, in one place: the factor step `step` trains at (1 = full
+  // training resolution), and the first step that trains at full resolution.
+  int downscale_at(int64_t step) const {
+    return 1 << std::max<int64_t>(num_downscales - step / resolution_schedule, 0);
+  }
+  int64_t full_resolution_from() const { return int64_t(num_downscales) * resolution_schedule; }
 };
 
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the

@@ -183,10 +183,13 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
         const float alpha = clamp_alpha(o * fast_exp_nonpositive(-sigma));
         const float t = T[j];
         const float next_t = t * (1.0f - alpha);
-        const bool hit = active[j] && sigma >= 0.0f && alpha >= kAlphaMin;
-        const bool finish = hit && next_t <= kTransmittanceMin;  // not blended
-        const bool blend = hit && !finish;
-        const float w = blend ? alpha * t : 0.0f;
+        // 0/1 int32 masks, not bool: GCC (12) vectorizes for AVX2 only when every lane
+        // value is 32 bits wide and nothing is evaluated conditionally (no && chains).
+        const int32_t hit = active[j] & int32_t(sigma >= 0.0f) & int32_t(alpha >= kAlphaMin);
+        const int32_t finish = hit & int32_t(next_t <= kTransmittanceMin);  // not blended
+        const int32_t blend = hit & (finish ^ 1);
+        const float weight = alpha * t;
+        const float w = blend ? weight : 0.0f;
         Cr[j] += w * cr;
         Cg[j] += w * cg;
         Cb[j] += w * cb;

@@ -33,6 +33,22 @@ std::array<float, 3> plot_color(size_t i) {
   return {c[0] / 255.0f, c[1] / 255.0f, c[2] / 255.0f};
 }
 
+std::vector<double> nice_ticks(double lo, double hi) {
+  if (!(hi > lo) || !std::isfinite(lo) || !std::isfinite(hi)) return {};
+  constexpr double kMaxTicks = 8;
+  const double magnitude = std::pow(10.0, std::floor(std::log10((hi - lo) / kMaxTicks)));
+  double step = 10 * magnitude;
+  for (double m : {1.0, 2.0, 5.0})
+    if ((hi - lo) / (m * magnitude) < kMaxTicks) {
+      step = m * magnitude;
+      break;
+    }
+  std::vector<double> ticks;
+  // k · step rather than repeated addition: no accumulated rounding in the labels.
+  for (double k = std::ceil(lo / step); k * step <= hi; ++k) ticks.push_back(k * step);
+  return ticks;
+}
+
 PlotFrame plot_frame(const PlotSpec& spec, const std::vector<PlotSeries>& series) {
   double x0 = std::numeric_limits<double>::infinity(), x1 = -x0, y0 = x0, y1 = -x0;
   for (const PlotSeries& s : series) {
@@ -68,14 +84,17 @@ FloatImage draw_line_plot(const PlotSpec& spec, const std::vector<PlotSeries>& s
   cv::Mat img(spec.height, spec.width, CV_8UC3, cv::Scalar(255, 255, 255));
   const cv::Scalar ink(40, 40, 40), grid(225, 225, 225);
   const int font = cv::FONT_HERSHEY_SIMPLEX;
-  constexpr int kTicks = 6;
-  for (int t = 0; t < kTicks; ++t) {
-    const double xv = f.x_min + (f.x_max - f.x_min) * t / (kTicks - 1);
-    const double yv = f.y_min + (f.y_max - f.y_min) * t / (kTicks - 1);
-    const int px = int(std::lround(f.pixel_x(xv))), py = int(std::lround(f.pixel_y(yv)));
+  for (double xv : nice_ticks(f.x_min, f.x_max)) {
+    const int px = int(std::lround(f.pixel_x(xv)));
     cv::line(img, {px, f.top}, {px, f.bottom}, grid, 1);
+    int baseline = 0;
+    const std::string label = tick_text(xv);
+    const int half = cv::getTextSize(label, font, 0.45, 1, &baseline).width / 2;  // centred under its line
+    cv::putText(img, label, {px - half, f.bottom + 20}, font, 0.45, ink, 1, cv::LINE_AA);
+  }
+  for (double yv : nice_ticks(f.y_min, f.y_max)) {
+    const int py = int(std::lround(f.pixel_y(yv)));
     cv::line(img, {f.left, py}, {f.right, py}, grid, 1);
-    cv::putText(img, tick_text(xv), {px - 20, f.bottom + 20}, font, 0.45, ink, 1, cv::LINE_AA);
     cv::putText(img, tick_text(yv), {8, py + 5}, font, 0.45, ink, 1, cv::LINE_AA);
   }
   cv::rectangle(img, {f.left, f.top}, {f.right, f.bottom}, ink, 1);

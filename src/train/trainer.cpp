@@ -118,7 +118,7 @@ StepStats Trainer::step() {
   StepStats stats;
   stats.step = step_;
   const int view = next_view();
-  const int factor = 1 << std::max<int64_t>(config_.num_downscales - step_ / config_.resolution_schedule, 0);
+  const int factor = config_.downscale_at(step_);
   const Camera cam = downscale_camera(data_.train[view].camera, factor);
   const FloatImage& target = target_at(view, factor);
   const size_t pixels = size_t(cam.width) * cam.height;

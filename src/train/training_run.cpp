@@ -214,7 +214,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     std::printf("static-only (Splatfacto baseline)\n");
   // Splatfacto's resolution schedule assumes 30k steps; a short run would silently end on
   // downscaled images and score poorly at full resolution.
-  const int64_t full_resolution_from = int64_t(config.num_downscales) * config.resolution_schedule;
+  const int64_t full_resolution_from = config.full_resolution_from();
   if (full_resolution_from >= config.iterations)
     std::printf("warning: this run never trains at full resolution (the resolution schedule reaches it at step "
                 "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
@@ -253,8 +253,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       return 130;
     }
     const StepStats s = trainer.step();
-    const int factor = 1 << std::max<int64_t>(config.num_downscales - s.step / config.resolution_schedule, 0);
-    if (factor == 1) {
+    if (config.downscale_at(s.step) == 1) {
       t_fwd.push_back(s.timings.forward), t_bwd.push_back(s.timings.backward);
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
       t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
