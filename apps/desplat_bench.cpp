@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <optional>
 
-#include "desplat/bench_run.hpp"
+#include "desplat/jobs/bench_run.hpp"
 #include "stop_signal.hpp"
 
 int main(int argc, char** argv) {

@@ -9,9 +9,9 @@
 #include <numbers>
 #include <random>
 
-#include "desplat/image_io.hpp"
-#include "desplat/raster.hpp"
-#include "desplat/trainer.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/raster/raster.hpp"
+#include "desplat/train/trainer.hpp"
 
 namespace {
 

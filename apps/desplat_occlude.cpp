@@ -5,8 +5,8 @@
 
 #include <cstdio>
 
-#include "desplat/occluders.hpp"
-#include "desplat/splits.hpp"
+#include "desplat/synth/occluders.hpp"
+#include "desplat/io/splits.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{

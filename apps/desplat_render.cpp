@@ -3,7 +3,7 @@
 
 #include <cstdio>
 
-#include "desplat/render_run.hpp"
+#include "desplat/jobs/render_run.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"Render views of a trained desplat model (the --out folder of desplat_train) to PNG files."};

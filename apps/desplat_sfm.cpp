@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <string>
 
-#include "desplat/sfm.hpp"
+#include "desplat/sfm/sfm.hpp"
 
 namespace {
 

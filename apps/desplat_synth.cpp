@@ -6,7 +6,7 @@
 #include <optional>
 #include <string>
 
-#include "desplat/synth.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace {
 

@@ -4,7 +4,7 @@
 
 #include <cstdio>
 
-#include "desplat/training_run.hpp"
+#include "desplat/jobs/training_run.hpp"
 #include "stop_signal.hpp"
 
 int main(int argc, char** argv) {

@@ -15,9 +15,9 @@
 #include <filesystem>
 #include <random>
 
-#include "desplat/colmap.hpp"
-#include "desplat/init.hpp"
-#include "desplat/raster.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/train/init.hpp"
+#include "desplat/raster/raster.hpp"
 
 namespace {
 

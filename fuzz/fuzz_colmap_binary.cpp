@@ -11,7 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 #include "fuzz_common.hpp"
 
 #ifndef DESPLAT_FUZZ_FILE

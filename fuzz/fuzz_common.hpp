@@ -13,7 +13,7 @@
 #include <fstream>
 #include <string>
 
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 
 namespace desplat::fuzz {
 

@@ -11,7 +11,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "desplat/ply.hpp"
+#include "desplat/io/ply.hpp"
 #include "fuzz_common.hpp"
 
 namespace {

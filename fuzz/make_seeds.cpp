@@ -9,8 +9,8 @@
 #include <set>
 #include <string>
 
-#include "desplat/colmap.hpp"
-#include "desplat/ply.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/ply.hpp"
 #include "fuzz_common.hpp"
 
 namespace {

@@ -2,7 +2,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "desplat/raster.hpp"
+#include "desplat/raster/raster.hpp"
 
 namespace desplat {
 namespace {

@@ -4,9 +4,9 @@
 
 #include <fstream>
 
-#include "desplat/bench_run.hpp"
-#include "desplat/line_plot.hpp"
-#include "desplat/synth.hpp"
+#include "desplat/jobs/bench_run.hpp"
+#include "desplat/eval/line_plot.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat {
 namespace {

@@ -12,7 +12,7 @@
 #include <cmath>
 #include <random>
 
-#include "desplat/camera_models.hpp"
+#include "desplat/io/camera_models.hpp"
 #include "io/opencv_reference.hpp"
 
 using namespace desplat;

@@ -29,8 +29,8 @@
 #include <string>
 #include <vector>
 
-#include "desplat/atomic_file.hpp"
-#include "desplat/checkpoint.hpp"
+#include "desplat/io/atomic_file.hpp"
+#include "desplat/io/checkpoint.hpp"
 #include "io/crc32.hpp"
 
 namespace desplat {

@@ -20,7 +20,7 @@
 #include <limits>
 #include <sstream>
 
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat::colmap;

@@ -6,7 +6,7 @@
 
 #include <algorithm>
 
-#include "desplat/composite.hpp"
+#include "desplat/raster/composite.hpp"
 #include "support/jet_gradient.hpp"
 #include "support/scenes.hpp"
 

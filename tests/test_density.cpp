@@ -4,7 +4,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "desplat/density.hpp"
+#include "desplat/train/density.hpp"
 
 namespace desplat {
 namespace {

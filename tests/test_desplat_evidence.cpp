@@ -14,10 +14,10 @@
 #include <cstdio>
 #include <memory>
 
-#include "desplat/mask_metrics.hpp"
-#include "desplat/occluders.hpp"
-#include "desplat/synth.hpp"
-#include "desplat/training_run.hpp"
+#include "desplat/eval/mask_metrics.hpp"
+#include "desplat/synth/occluders.hpp"
+#include "desplat/synth/synth.hpp"
+#include "desplat/jobs/training_run.hpp"
 
 namespace desplat {
 namespace {

@@ -2,7 +2,7 @@
 // repeated runs): per-entry gradient records are reduced in a fixed order.
 #include <gtest/gtest.h>
 
-#include "desplat/raster.hpp"
+#include "desplat/raster/raster.hpp"
 #include "support/scenes.hpp"
 
 namespace desplat::test {

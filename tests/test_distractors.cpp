@@ -7,9 +7,9 @@
 #include <cmath>
 #include <filesystem>
 
-#include "desplat/distractors.hpp"
-#include "desplat/init.hpp"
-#include "desplat/training_checkpoint.hpp"
+#include "desplat/train/distractors.hpp"
+#include "desplat/train/init.hpp"
+#include "desplat/train/training_checkpoint.hpp"
 #include "support/synthetic_views.hpp"
 
 namespace desplat::test {

@@ -1,7 +1,7 @@
 // The tiled forward kernel against the brute-force double-precision reference.
 #include <gtest/gtest.h>
 
-#include "desplat/raster.hpp"
+#include "desplat/raster/raster.hpp"
 #include "support/reference_render.hpp"
 #include "support/scenes.hpp"
 

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "desplat/image_io.hpp"
+#include "desplat/io/image_io.hpp"
 
 namespace desplat {
 namespace {

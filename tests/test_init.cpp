@@ -5,7 +5,7 @@
 #include <cmath>
 #include <random>
 
-#include "desplat/init.hpp"
+#include "desplat/train/init.hpp"
 
 namespace desplat {
 namespace {

@@ -7,7 +7,7 @@
 #include <random>
 #include <vector>
 
-#include "desplat/loss.hpp"
+#include "desplat/train/loss.hpp"
 
 namespace desplat {
 namespace {

@@ -19,11 +19,11 @@
 #include <set>
 #include <sstream>
 
-#include "desplat/colmap.hpp"
-#include "desplat/masks.hpp"
-#include "desplat/occluders.hpp"
-#include "desplat/scene.hpp"
-#include "desplat/undistort.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/masks.hpp"
+#include "desplat/synth/occluders.hpp"
+#include "desplat/io/scene.hpp"
+#include "desplat/io/undistort.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "desplat/ply.hpp"
+#include "desplat/io/ply.hpp"
 
 namespace desplat {
 namespace {

@@ -20,9 +20,9 @@
 #include <sstream>
 #include <unordered_map>
 
-#include "desplat/camera_models.hpp"
-#include "desplat/scene.hpp"
-#include "desplat/undistort.hpp"
+#include "desplat/io/camera_models.hpp"
+#include "desplat/io/scene.hpp"
+#include "desplat/io/undistort.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;

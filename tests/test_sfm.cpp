@@ -15,9 +15,9 @@
 #include <numbers>
 #include <sstream>
 
-#include "desplat/colmap.hpp"
-#include "desplat/image_io.hpp"
-#include "desplat/sfm.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/sfm/sfm.hpp"
 
 namespace fs = std::filesystem;
 namespace sfm = desplat::sfm;

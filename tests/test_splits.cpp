@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <fstream>
 
-#include "desplat/splits.hpp"
+#include "desplat/io/splits.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;

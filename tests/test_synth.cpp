@@ -18,10 +18,10 @@
 #include <set>
 #include <sstream>
 
-#include "desplat/colmap.hpp"
-#include "desplat/image_io.hpp"
-#include "desplat/scene.hpp"
-#include "desplat/synth.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/io/scene.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;

@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
 
-#include "desplat/ply.hpp"
-#include "desplat/synth.hpp"
+#include "desplat/io/ply.hpp"
+#include "desplat/synth/synth.hpp"
 #include "support/scene_on_disk.hpp"
 #include "support/synthetic_views.hpp"
 

@@ -5,7 +5,7 @@
 
 #include <filesystem>
 
-#include "desplat/training_checkpoint.hpp"
+#include "desplat/train/training_checkpoint.hpp"
 #include "support/synthetic_views.hpp"
 
 namespace desplat::test {

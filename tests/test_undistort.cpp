@@ -13,9 +13,9 @@
 #include <iostream>
 #include <random>
 
-#include "desplat/colmap.hpp"
-#include "desplat/image_io.hpp"
-#include "desplat/undistort.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/io/undistort.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;

@@ -1,5 +1,5 @@
 // Atomic file replacement (see include/desplat/atomic_file.hpp for the protocol).
-#include "desplat/atomic_file.hpp"
+#include "desplat/io/atomic_file.hpp"
 
 #include <fcntl.h>
 #include <sys/file.h>

@@ -1,6 +1,6 @@
 // COLMAP's camera models: each model is a distortion on the camera plane plus a pinhole
 // matrix; the table at the bottom turns each into a pair of projection functions.
-#include "desplat/camera_models.hpp"
+#include "desplat/io/camera_models.hpp"
 
 #include <algorithm>
 #include <cmath>

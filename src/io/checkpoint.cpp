@@ -1,6 +1,6 @@
 // Checkpoint container (see include/desplat/checkpoint.hpp for the file format) and the
 // CRC-32 it uses (src/io/crc32.hpp).
-#include "desplat/checkpoint.hpp"
+#include "desplat/io/checkpoint.hpp"
 
 #include <array>
 #include <bit>
@@ -15,7 +15,7 @@
 #include <system_error>
 #include <utility>
 
-#include "desplat/atomic_file.hpp"
+#include "desplat/io/atomic_file.hpp"
 #include "io/crc32.hpp"
 
 namespace desplat {

@@ -9,7 +9,7 @@
 //                each, with 2^64 − 1 meaning "no 3D point"
 //   points3D.bin u64 count; per point: u64 id, f64 xyz[3], u8 rgb[3], f64 error,
 //                u64 track_length, then (u32 image_id, u32 point2D_idx) each
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 
 #include <bit>
 #include <charconv>

@@ -11,7 +11,7 @@
 // identifies every double exactly, and unlike the shortest round-trip decimal it also survives
 // COLMAP's own reader, which parses through long double and so rounds twice (a shortest
 // decimal near the midpoint of two doubles, e.g. 2.535696468129226, comes back 1 ulp off).
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 
 #include <algorithm>
 #include <charconv>

@@ -1,7 +1,7 @@
 // Ground-truth distractor masks: reading them for a scene's views and scoring predicted masks.
 // See include/desplat/masks.hpp for the conventions implemented here. desplat_occlude's
 // occluder pasting lives in occluders.cpp.
-#include "desplat/masks.hpp"
+#include "desplat/io/masks.hpp"
 
 #include <OpenImageIO/imageio.h>
 
@@ -9,7 +9,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "desplat/undistort.hpp"
+#include "desplat/io/undistort.hpp"
 #include "image_read_helpers.hpp"
 
 namespace desplat {

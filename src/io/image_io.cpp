@@ -1,5 +1,5 @@
 // Image reading and writing with OpenImageIO.
-#include "desplat/image_io.hpp"
+#include "desplat/io/image_io.hpp"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

@@ -6,8 +6,8 @@
 #include <array>
 #include <vector>
 
-#include "desplat/camera_models.hpp"
-#include "desplat/colmap.hpp"
+#include "desplat/io/camera_models.hpp"
+#include "desplat/io/colmap.hpp"
 
 namespace desplat::detail {
 

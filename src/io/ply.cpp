@@ -3,7 +3,7 @@
 // Both directions share one table of columns (property name → place in a
 // GaussianSet), so the written order and the read mapping cannot drift apart. The
 // reader is strict: it rejects anything it would have to guess about or drop.
-#include "desplat/ply.hpp"
+#include "desplat/io/ply.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -22,7 +22,7 @@
 #include <utility>
 #include <vector>
 
-#include "desplat/atomic_file.hpp"
+#include "desplat/io/atomic_file.hpp"
 
 namespace desplat {
 namespace fs = std::filesystem;

@@ -1,5 +1,5 @@
 // COLMAP capture -> Scene (see include/desplat/scene.hpp for the rules this implements).
-#include "desplat/scene.hpp"
+#include "desplat/io/scene.hpp"
 
 #include <OpenImageIO/imageio.h>
 #include <unistd.h>
@@ -14,8 +14,8 @@
 #include <map>
 #include <optional>
 
-#include "desplat/camera_models.hpp"
-#include "desplat/masks.hpp"
+#include "desplat/io/camera_models.hpp"
+#include "desplat/io/masks.hpp"
 
 namespace desplat {
 namespace {

@@ -1,5 +1,5 @@
 // Train/test split rules; see include/desplat/splits.hpp for each rule's definition.
-#include "desplat/splits.hpp"
+#include "desplat/io/splits.hpp"
 
 #include <algorithm>
 #include <cmath>

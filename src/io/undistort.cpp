@@ -1,6 +1,6 @@
 // Undistortion as COLMAP's image_undistorter does it: the choice of the pinhole camera
 // follows COLMAP 3.8's UndistortCamera; the resampling uses OpenCV.
-#include "desplat/undistort.hpp"
+#include "desplat/io/undistort.hpp"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>

@@ -6,7 +6,7 @@
 
 #include <omp.h>
 
-#include "desplat/raster.hpp"
+#include "desplat/raster/raster.hpp"
 
 namespace desplat::raster {
 

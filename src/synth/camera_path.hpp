@@ -6,8 +6,8 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "desplat/colmap.hpp"
-#include "desplat/synth.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::synth {
 

@@ -4,7 +4,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "desplat/camera_models.hpp"
+#include "desplat/io/camera_models.hpp"
 #include "synth/random.hpp"
 
 namespace desplat::synth {

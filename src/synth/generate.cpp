@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <fstream>
 
-#include "desplat/synth.hpp"
+#include "desplat/synth/synth.hpp"
 #include "synth/camera_path.hpp"
 #include "synth/distractors.hpp"
 #include "synth/photo_effects.hpp"

@@ -5,8 +5,8 @@
 #include <array>
 #include <cstdint>
 
-#include "desplat/image_io.hpp"
-#include "desplat/synth.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::synth {
 

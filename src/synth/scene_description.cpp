@@ -6,7 +6,7 @@
 #include <set>
 #include <sstream>
 
-#include "desplat/synth.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::synth {
 namespace {

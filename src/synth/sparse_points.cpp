@@ -5,7 +5,7 @@
 #include <cmath>
 #include <optional>
 
-#include "desplat/camera_models.hpp"
+#include "desplat/io/camera_models.hpp"
 #include "synth/random.hpp"
 
 namespace desplat::synth {

@@ -4,7 +4,7 @@
 
 #include <vector>
 
-#include "desplat/colmap.hpp"
+#include "desplat/io/colmap.hpp"
 #include "synth/camera_path.hpp"
 #include "synth/world.hpp"
 

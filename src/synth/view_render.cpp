@@ -1,7 +1,7 @@
 // Supersampled ray tracing of one view.
 #include "synth/view_render.hpp"
 
-#include "desplat/camera_models.hpp"
+#include "desplat/io/camera_models.hpp"
 #include "synth/random.hpp"
 
 namespace desplat::synth {

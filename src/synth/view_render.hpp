@@ -7,8 +7,8 @@
 #include <optional>
 #include <vector>
 
-#include "desplat/colmap.hpp"
-#include "desplat/image_io.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/image_io.hpp"
 #include "synth/camera_path.hpp"
 #include "synth/world.hpp"
 

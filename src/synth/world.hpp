@@ -9,7 +9,7 @@
 #include <limits>
 #include <vector>
 
-#include "desplat/synth.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::synth {
 

@@ -1,5 +1,5 @@
 // Split / duplicate / cull / opacity reset (REFERENCE.md §7).
-#include "desplat/density.hpp"
+#include "desplat/train/density.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>

@@ -1,12 +1,12 @@
 // Initialization and per-view density control of distractor Gaussians.
-#include "desplat/distractors.hpp"
+#include "desplat/train/distractors.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <random>
 #include <stdexcept>
 
-#include "desplat/init.hpp"
+#include "desplat/train/init.hpp"
 
 namespace desplat {
 

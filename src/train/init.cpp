@@ -1,5 +1,5 @@
 // Initialization of static Gaussians from a point cloud (REFERENCE.md §5).
-#include "desplat/init.hpp"
+#include "desplat/train/init.hpp"
 
 #include <nanoflann.hpp>
 

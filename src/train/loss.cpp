@@ -1,7 +1,7 @@
 // 0.8·L1 + 0.2·(1 − SSIM) with a hand-written gradient. SSIM's five local statistics
 // come from a separable 11-tap Gaussian filter over the valid region; the gradient
 // goes back through the same filter transposed (a "full" scatter).
-#include "desplat/loss.hpp"
+#include "desplat/train/loss.hpp"
 
 #include <cmath>
 #include <stdexcept>

@@ -1,6 +1,6 @@
 // One table of (name, field) pairs drives both directions, so a new setting is added
 // in exactly one place.
-#include "desplat/train_config_json.hpp"
+#include "desplat/train/train_config_json.hpp"
 
 #include <stdexcept>
 #include <string>

@@ -1,5 +1,5 @@
 // Row-aligned parameter/moment/statistics storage and the Adam update.
-#include "desplat/trainable.hpp"
+#include "desplat/train/trainable.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 // rendered separately and composited over a random background; photometric loss plus
 // the opacity regularizers; backward through the composite into both; Adam; density
 // control (REFERENCE.md §4–7).
-#include "desplat/trainer.hpp"
+#include "desplat/train/trainer.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -12,8 +12,8 @@
 #include <omp.h>
 #include <stdexcept>
 
-#include "desplat/init.hpp"
-#include "desplat/loss.hpp"
+#include "desplat/train/init.hpp"
+#include "desplat/train/loss.hpp"
 
 namespace desplat {
 namespace {

@@ -3,7 +3,7 @@
 // "trainer/view_order". Per-set scalars (Adam step, statistics flag) are in the metadata:
 // "adam_step"/"statistics_empty" for the static set, "distractors": {"views": [names],
 // "adam_step": [...], "statistics_empty": [...]} for the per-view sets.
-#include "desplat/training_checkpoint.hpp"
+#include "desplat/train/training_checkpoint.hpp"
 
 namespace desplat {
 namespace {

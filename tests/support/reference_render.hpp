@@ -10,9 +10,9 @@
 #include <numeric>
 #include <vector>
 
-#include "desplat/camera.hpp"
-#include "desplat/gaussians.hpp"
-#include "desplat/raster.hpp"
+#include "desplat/core/camera.hpp"
+#include "desplat/core/gaussians.hpp"
+#include "desplat/raster/raster.hpp"
 #include "raster/stage_math.hpp"
 
 namespace desplat::test {

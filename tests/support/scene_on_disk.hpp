@@ -5,9 +5,9 @@
 #include <Eigen/Geometry>
 #include <filesystem>
 
-#include "desplat/colmap.hpp"
-#include "desplat/image_io.hpp"
-#include "desplat/trainer.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/train/trainer.hpp"
 
 namespace desplat::test {
 

@@ -4,8 +4,8 @@
 #include <cmath>
 #include <random>
 
-#include "desplat/camera.hpp"
-#include "desplat/gaussians.hpp"
+#include "desplat/core/camera.hpp"
+#include "desplat/core/gaussians.hpp"
 
 namespace desplat::test {
 

@@ -6,8 +6,8 @@
 #include <cmath>
 #include <random>
 
-#include "desplat/raster.hpp"
-#include "desplat/trainer.hpp"
+#include "desplat/raster/raster.hpp"
+#include "desplat/train/trainer.hpp"
 
 namespace desplat::test {
 

@@ -1,0 +1,58 @@
+// The whole training job behind desplat_train: load the scene (or run SfM first),
+// train with progress output, evaluate, checkpoint, and write the outputs.
+//
+// Output folder (`out_dir`):
+//   config.json          effective training configuration + run options
+//   checkpoint.ckpt      latest checkpoint (atomic; --resume continues from it)
+//   metrics.json         test-view PSNR/SSIM per image and mean, evaluation history,
+//                        Gaussian counts and MB (static, distractor), timings (median per
+//                        step at full resolution, distractor branch separately), and
+//                        distractor_masks (IoU per training view and mean) when the scene
+//                        has ground-truth masks (masks.hpp)
+//   renders/test/*.png   ground truth | render, side by side, per test view
+//   renders/train/*.png  DeSplat only: truth | static | distractor | composite | mask per
+//                        training view (the paper's Fig. 2)
+//   point_cloud.ply      static Gaussians as a standard 3DGS PLY, original COLMAP frame
+#pragma once
+
+#include <atomic>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "desplat/io/scene.hpp"
+#include "desplat/train/trainer.hpp"
+
+namespace desplat {
+
+struct TrainingRunOptions {
+  std::filesystem::path data_dir;    // images/ + sparse/0/
+  std::filesystem::path images_dir;  // instead of data_dir: run SfM on a folder of photos
+  std::filesystem::path out_dir;
+  std::filesystem::path config_file; // JSON overrides of TrainConfig
+  std::optional<int64_t> iterations;
+  std::optional<uint64_t> seed;
+  std::optional<int> threads;
+  bool static_only = false;  // the Splatfacto baseline: no distractors
+  // Ablation switches (override the config file): distractors.initial_count with
+  // reference_pixels = 0 (exactly that many per view), distractors.density_control = false,
+  // distractors.regularize = false.
+  std::optional<int> distractors_per_view;
+  bool no_distractor_density = false;
+  bool no_regularization = false;
+  bool resume = false;
+  int downscale = 1;
+  SplitOptions split;
+  int eval_every = 0;        // 0: only at the end
+  int checkpoint_every = 1000;
+  int log_every = 100;       // plain-log interval when stdout is not a terminal
+};
+
+// Returns the process exit code: 0 done, 130 interrupted (checkpoint written).
+// Throws for bad input (messages name the file and the problem).
+int run_training(const TrainingRunOptions& options, const std::atomic<bool>& stop_requested);
+
+// Loads a scene and its pixels into TrainingData (normalized frame).
+TrainingData load_training_data(const Scene& scene);
+
+}  // namespace desplat

@@ -1,0 +1,103 @@
+// CPU Gaussian splatting: forward rendering and its hand-written backward pass.
+//
+// Semantics follow gsplat 1.5's "classic" rasterizer exactly (REFERENCE.md §3): EWA
+// projection with a 0.3 px² blur, 3.33σ extents, 16×16 tiles with per-tile depth
+// order, front-to-back blending with α = min(0.999, o·exp(−σ)), α < 1/255 skipped and
+// a pixel finished once its transmittance would reach 1e-4.
+//
+// Data layout (chosen for a CPU):
+//   * every per-Gaussian array is a structure of arrays, row-major [N, k];
+//   * images are row-major [H, W, c] (channels interleaved), pixel (x, y) at y·W + x;
+//   * binning produces one contiguous, depth-sorted work list per tile
+//     (`tile_offsets`/`tile_entries`, CSR form); a tile is rasterized Gaussian by
+//     Gaussian with the inner loop running over a row of up to 16 pixels held in
+//     per-pixel arrays, restricted to the part of the tile inside the Gaussian's
+//     3.33σ box (exact: outside the box α < 1/255);
+//   * the backward pass writes one gradient record per (tile, Gaussian) entry and then
+//     reduces each Gaussian's records in a fixed order, so outputs and gradients are
+//     bit-identical for any number of threads, with no atomics anywhere.
+//
+// Thread safety: the functions are re-entrant; each call uses OpenMP with
+// `RasterSettings::num_threads` threads. Outputs are owned by the caller and reused
+// between calls (vectors are resized, not reallocated, when sizes repeat).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "desplat/core/camera.hpp"
+#include "desplat/core/gaussians.hpp"
+
+namespace desplat {
+
+struct RasterSettings {
+  float near_plane = 0.01f;  // cull p.z <= near  [world units along the optical axis]
+  float far_plane = 1e10f;   // cull p.z >= far
+  float eps2d = 0.3f;        // isotropic blur added to every 2D covariance [px²]
+  // SH degree used for this render (≤ the stored degree); -1 means "the stored one".
+  int active_sh_degree = -1;
+  int num_threads = 0;  // 0: OpenMP's default
+};
+
+constexpr int kTileSize = 16;
+
+// Everything the forward pass produces. The per-pixel and per-Gaussian results are
+// the public outputs; the members under "saved for backward" are the state the
+// backward pass needs and should be treated as opaque.
+struct RasterOutput {
+  int width = 0, height = 0;
+  // Per pixel.
+  std::vector<float> color;  // [H, W, 3] premultiplied C = Σ cᵢ αᵢ Tᵢ (no background)
+  std::vector<float> alpha;  // [H, W]    accumulated alpha A = 1 − T_final
+  std::vector<float> depth;  // [H, W]    expected depth Σ zᵢ αᵢ Tᵢ (not normalized)
+  // Per Gaussian (entries of invisible Gaussians are zero).
+  std::vector<float> means2d;    // [N, 2] projected center [px]
+  std::vector<float> conics;     // [N, 3] (a, b, c) of the inverse 2D covariance
+  std::vector<int32_t> radii;    // [N, 2] 3.33σ extent in x and y [px]; 0 if culled
+  std::vector<float> depths;     // [N]    camera-space z
+  std::vector<uint8_t> visible;  // [N]    1 if the Gaussian touches at least one tile
+  // Work done, for benchmarks: Gaussian–pixel pairs whose α was evaluated.
+  int64_t evaluated_pairs = 0;
+
+  // --- saved for backward ---
+  std::vector<float> rgb;                 // [N, 3] color after SH / clamp
+  std::vector<float> opacity;             // [N]    sigmoid(logit)
+  std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
+  std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
+  std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
+  std::vector<int32_t> gaussian_offsets;  // [N + 1] CSR offsets into entry_of_gaussian
+  std::vector<int32_t> entry_of_gaussian; // [E] each Gaussian's entries, in tile order
+  std::vector<float> final_transmittance; // [H, W]
+  std::vector<int32_t> last_contributor;  // [H, W] index within the tile list, −1: none
+};
+
+struct RasterGradients {
+  std::vector<float> means;           // [N, 3]
+  std::vector<float> log_scales;      // [N, 3]
+  std::vector<float> quats;           // [N, 4]
+  std::vector<float> opacity_logits;  // [N]
+  std::vector<float> colors;          // same shape as GaussianView::colors
+  std::vector<float> means2d;         // [N, 2] ∂L/∂μ2d (summed over pixels)
+  // Densification statistic (REFERENCE.md §3): per Gaussian, the 2-norm of
+  // (Σ_pixels |∂L/∂μ2d.x|, Σ_pixels |∂L/∂μ2d.y|) [loss units per px].
+  std::vector<float> absgrad;         // [N]
+
+  // Scratch reused between calls: one gradient record per tile entry.
+  std::vector<float> entry_scratch;
+};
+
+// Renders `gaussians` seen from `camera`. Throws std::invalid_argument for bad input
+// (see GaussianView::validate, Camera::validate, active SH degree out of range).
+void rasterize_forward(const GaussianView& gaussians, const Camera& camera,
+                       const RasterSettings& settings, RasterOutput& out);
+
+// Gradients of a scalar loss L given ∂L/∂color [H,W,3], ∂L/∂alpha [H,W] and
+// ∂L/∂depth [H,W]; an empty span means zero. `forward` must be the result of
+// rasterize_forward with the same gaussians, camera and settings.
+void rasterize_backward(const GaussianView& gaussians, const Camera& camera,
+                        const RasterSettings& settings, const RasterOutput& forward,
+                        std::span<const float> dL_dcolor, std::span<const float> dL_dalpha,
+                        std::span<const float> dL_ddepth, RasterGradients& grads);
+
+}  // namespace desplat

@@ -1,0 +1,53 @@
+// Adaptive density control for static Gaussians (REFERENCE.md §7, Splatfacto defaults).
+// Thresholds are in the normalized world frame (§1) and in screen fractions.
+#pragma once
+
+#include <cstdint>
+#include <random>
+
+#include "desplat/train/trainable.hpp"
+
+namespace desplat {
+
+struct DensifySettings {
+  int warmup = 500;            // no refinement at or before this step
+  int refine_every = 100;      // refine at steps that are multiples of this
+  int reset_alpha_every = 30;  // opacity reset every reset_alpha_every·refine_every steps
+  int stop_split_at = 15000;   // densify and reset only before this step; cull after
+  int stop_screen_size_at = 4000;
+  float grad_threshold = 0.0008f;     // mean absgrad (× 0.5·max(W, H)) that counts as high
+  float size_threshold = 0.01f;       // max world scale: split above, duplicate at or below
+  float split_screen_size = 0.05f;    // also split large-on-screen Gaussians before stop_screen_size_at
+  int split_samples = 2;
+  float split_scale_factor = 1.6f;
+  float cull_alpha = 0.1f;            // cull opacity below this
+  float cull_scale = 0.5f;            // after the first reset: cull max world scale above this
+  float cull_screen_size = 0.15f;     // … or screen size above this before stop_screen_size_at
+  bool enabled = true;
+};
+
+struct RefineReport {
+  int64_t split = 0, duplicated = 0, culled = 0;
+  bool opacity_reset = false;
+  bool ran = false;
+};
+
+// Called after every optimizer step. `step` counts from 0; `image_size` is max(W, H)
+// of the training images at this step; `num_train_views` is the number of training
+// views. Clears the statistics after each refinement.
+RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
+                              int num_train_views, std::mt19937_64& rng);
+
+// One refinement regardless of the schedule: densify (split/duplicate) when `densify`,
+// then cull (opacity, and the scale/screen-size rules by `step`); with `cull_unseen`
+// also every Gaussian not seen since the last refinement (zero max screen radius: the
+// per-view distractor rule of REFERENCE.md §7). No opacity reset. Clears the statistics.
+RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
+                                   bool densify, bool cull_unseen, std::mt19937_64& rng);
+
+// Gaussian-wise pieces, exposed for tests.
+GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask, int samples, float scale_factor,
+                          std::mt19937_64& rng);
+GaussianSet copy_rows(const GaussianSet& g, const std::vector<uint8_t>& mask);
+
+}  // namespace desplat

@@ -1,0 +1,61 @@
+// Gaussians under optimization: parameters, their Adam moments, and the densification
+// statistics, all row-aligned (row i of every array is Gaussian i). Densification and
+// pruning go through keep()/append() so no array can fall out of step with the others.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "desplat/core/gaussians.hpp"
+#include "desplat/raster/raster.hpp"
+
+namespace desplat {
+
+enum class ParamGroup { Means = 0, LogScales, Quats, OpacityLogits, Colors };
+constexpr int kParamGroups = 5;
+
+// Adam hyper-parameters (REFERENCE.md §6).
+struct AdamSettings {
+  float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
+};
+
+// Learning rate per group; for Colors in SH mode the DC coefficient uses `colors_dc`
+// and the higher bands `colors_rest` (in RGB mode `colors_dc` applies to all three).
+struct LearningRates {
+  float means = 1.6e-4f, log_scales = 5e-3f, quats = 1e-3f, opacity_logits = 5e-2f;
+  float colors_dc = 2.5e-3f, colors_rest = 1.25e-4f;
+};
+
+struct TrainableGaussians {
+  GaussianSet params;
+  std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params
+  int64_t adam_step = 0;  // Adam's bias-correction step count (one for all groups)
+  // Densification statistics since the last refinement (REFERENCE.md §7).
+  std::vector<float> absgrad_sum;     // [N] Σ over steps of the absgrad statistic
+  std::vector<int32_t> visible_count; // [N] steps in which the Gaussian was visible
+  std::vector<float> max_screen_radius;  // [N] max over steps of radius / max(W, H)
+  bool statistics_empty = true;          // no step recorded since the last reset
+
+  explicit TrainableGaussians(GaussianSet initial = {});
+  size_t size() const { return params.size(); }
+  std::vector<float>& param(ParamGroup g);
+  const std::vector<float>& param(ParamGroup g) const { return const_cast<TrainableGaussians&>(*this).param(g); }
+  int floats_per_gaussian(ParamGroup g) const;
+
+  // Keeps the rows where keep[i] != 0, in order, in every array.
+  void keep(const std::vector<uint8_t>& keep);
+  // Appends Gaussians (same color mode and SH degree) with zero moments and statistics.
+  void append(const GaussianSet& extra);
+  void reset_statistics();
+  // Records one step's statistics from the rasterizer's outputs for this view.
+  void accumulate_statistics(const RasterOutput& forward, const RasterGradients& grads);
+
+  // One Adam step (PyTorch's formulation) over every group with the given rates.
+  void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {});
+  // Throws std::logic_error if any array's length disagrees with size().
+  void check_consistent() const;
+};
+
+}  // namespace desplat

@@ -1,0 +1,156 @@
+// DeSplat training on the CPU (REFERENCE.md §4–7): static Gaussians shared by all views
+// plus, per training view, distractor Gaussians only that view renders; with
+// config.distractors.enabled = false it is the static Splatfacto baseline.
+//
+// All geometry is in the normalized world frame (§1). Training images are float RGB
+// [H, W, 3] at the full training resolution; the resolution schedule derives the
+// lower-resolution copies (block averages) once per view and keeps them.
+// Not thread-safe: one Trainer per thread; it uses OpenMP internally.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "desplat/core/camera.hpp"
+#include "desplat/raster/composite.hpp"
+#include "desplat/train/density.hpp"
+#include "desplat/train/distractors.hpp"
+#include "desplat/core/image.hpp"
+#include "desplat/raster/raster.hpp"
+#include "desplat/train/trainable.hpp"
+#include "desplat/core/world_frame.hpp"
+
+namespace desplat {
+
+struct TrainView {
+  std::string name;
+  Camera camera;      // undistorted pinhole, normalized frame, full training resolution
+  FloatImage image;   // [H, W, 3] matching the camera
+};
+
+struct TrainingData {
+  std::vector<TrainView> train, test;
+  std::vector<std::array<float, 3>> points;     // normalized frame
+  std::vector<std::array<uint8_t, 3>> colors;
+  WorldNormalization normalization;
+};
+
+struct TrainConfig {
+  int64_t iterations = 30000;
+  int sh_degree = 3;
+  int sh_degree_interval = 1000;  // active SH degree +1 every this many steps
+  int num_downscales = 2;         // train at 2^num_downscales lower resolution first …
+  int resolution_schedule = 3000; // … halving the factor every this many steps
+  float ssim_lambda = 0.2f;
+  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this …
+  int64_t means_lr_decay_steps = 30000;  // … over this many steps, whatever `iterations` is (Splatfacto)
+  LearningRates lr;
+  DensifySettings densify;
+  DistractorSettings distractors;
+  bool random_background = true;
+  std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
+  int random_init_points = 50000;  // used when the scene has no points
+  float random_init_extent = 1.0f; // half-width of the cube for random initialization
+  uint64_t seed = 0;
+  // 0: all cores. > 0 also becomes the calling thread's OpenMP default team size, so the
+  // optimizer, loss and initialization honour it as the rasterizer does.
+  int threads = 0;
+
+  // The resolution schedule, in one place: the factor step `step` trains at (1 = full
+  // training resolution), and the first step that trains at full resolution.
+  int downscale_at(int64_t step) const {
+    return 1 << std::max<int64_t>(num_downscales - step / resolution_schedule, 0);
+  }
+  int64_t full_resolution_from() const { return int64_t(num_downscales) * resolution_schedule; }
+};
+
+// Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
+// work of the view's distractor branch (its forward, backward, Adam and refinement);
+// `loss` includes the compositing and its gradient.
+struct StepTimings {
+  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0;
+  double total() const { return forward + backward + loss + optimizer + distractor; }
+};
+
+struct StepStats {
+  int64_t step = 0;
+  double loss = 0, psnr = 0;
+  size_t gaussians = 0;             // static
+  size_t view_distractors = 0;      // distractors of this step's view
+  RefineReport refine;
+  RefineReport distractor_refine;   // summed over views when they were refined this step
+  int64_t nonfinite_pruned = 0;
+  StepTimings timings;
+};
+
+struct ViewMetrics {
+  std::string name;
+  double psnr = 0, ssim = 0;
+};
+
+class Trainer {
+ public:
+  // `data` must outlive the trainer.
+  Trainer(const TrainingData& data, TrainConfig config);
+
+  StepStats step();
+  int64_t current_step() const { return step_; }
+  const TrainConfig& config() const { return config_; }
+  const TrainingData& data() const { return data_; }
+  const TrainableGaussians& gaussians() const { return gaussians_; }
+  TrainableGaussians& mutable_gaussians() { return gaussians_; }  // tests and checkpoints
+  // Per training view (data.train order); empty when distractors are disabled.
+  const std::vector<TrainableGaussians>& distractors() const { return distractors_; }
+  std::vector<TrainableGaussians>& mutable_distractors() { return distractors_; }
+  size_t distractor_count() const;  // over all views
+  std::mt19937_64& rng() { return rng_; }
+  const std::mt19937_64& rng() const { return rng_; }
+
+  // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped).
+  FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;
+  // Every layer of training view `train_view` at its full training resolution.
+  ViewLayers render_layers(size_t train_view, const std::array<float, 3>& background) const;
+  // What every render at this step uses: the configured threads and the active SH degree.
+  RasterSettings raster_settings() const;
+  // PSNR/SSIM of every view's render over the evaluation background.
+  std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
+
+  // Where non-finite values are reported (once per incident); default: stderr.
+  std::function<void(const std::string&)> warn;
+
+  // Exposed for checkpointing: the epoch permutation and the position in it.
+  std::vector<int32_t> view_order;
+  int64_t view_order_pos = 0;
+  void set_step(int64_t s) { step_ = s; }
+
+ private:
+  const TrainingData& data_;
+  TrainConfig config_;
+  TrainableGaussians gaussians_;
+  std::vector<TrainableGaussians> distractors_;
+  std::mt19937_64 rng_;
+  int64_t step_ = 0;
+  // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
+  std::vector<std::vector<FloatImage>> downscaled_;
+  // Scratch reused every step.
+  RasterOutput forward_, distractor_forward_;
+  RasterGradients grads_, distractor_grads_;
+  std::vector<float> composite_, d_composite_, d_color_, d_alpha_, d_distractor_color_, d_distractor_alpha_;
+
+  int next_view();
+  const FloatImage& target_at(int view, int factor);
+  // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
+  // (built only when something is pruned).
+  int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
+  RefineReport refine_all_distractors(int image_size);
+};
+
+// Camera and image at 1/factor resolution (block average, sizes rounded down).
+Camera downscale_camera(const Camera& c, int factor);
+FloatImage downscale_image(const FloatImage& img, int factor);
+
+}  // namespace desplat

@@ -1,0 +1,134 @@
+// Re-rendering a saved model: the scene (cameras only) is loaded again from the data
+// folder recorded in the model's config.json; the Gaussians come from its checkpoint.
+#include "desplat/jobs/render_run.hpp"
+
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <stdexcept>
+
+#include "desplat/io/checkpoint.hpp"
+#include "desplat/raster/composite.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/raster/raster.hpp"
+#include "desplat/io/scene.hpp"
+#include "desplat/train/train_config_json.hpp"
+#include "desplat/train/trainer.hpp"
+#include "desplat/train/training_checkpoint.hpp"
+
+namespace desplat {
+namespace fs = std::filesystem;
+namespace {
+
+// Straight (unpremultiplied) RGBA: what image viewers and compositors expect in a PNG.
+FloatImage with_alpha(const FloatImage& rgb_over_black, const FloatImage& alpha) {
+  FloatImage out{rgb_over_black.width, rgb_over_black.height, 4, {}};
+  out.pixels.resize(alpha.pixels.size() * 4);
+  for (size_t p = 0; p < alpha.pixels.size(); ++p) {
+    const float a = alpha.pixels[p];
+    for (int c = 0; c < 3; ++c) out.pixels[4 * p + c] = a > 0 ? rgb_over_black.pixels[3 * p + c] / a : 0.0f;
+    out.pixels[4 * p + 3] = a;
+  }
+  return out;
+}
+
+std::vector<size_t> choose_views(const Scene& scene, const std::string& views, const std::string& data_dir) {
+  std::vector<size_t> chosen;
+  if (views == "test") return scene.test_views();
+  if (views == "train") return scene.train_views();
+  if (views == "all") {
+    for (size_t i = 0; i < scene.views.size(); ++i) chosen.push_back(i);
+    return chosen;
+  }
+  std::stringstream names(views);
+  std::string name;
+  while (std::getline(names, name, ',')) {
+    size_t i = 0;
+    while (i < scene.views.size() && scene.views[i].name != name) ++i;
+    if (i == scene.views.size()) throw std::invalid_argument("no view named '" + name + "' in " + data_dir);
+    chosen.push_back(i);
+  }
+  return chosen;
+}
+
+}  // namespace
+
+int run_render(const RenderRunOptions& o) {
+  const fs::path config_path = o.model_dir / "config.json", ckpt_path = o.model_dir / "checkpoint.ckpt";
+  std::ifstream f(config_path);
+  if (!f) throw std::invalid_argument("not a desplat model folder: cannot read " + config_path.string());
+  nlohmann::json cfg;
+  try {
+    f >> cfg;
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(config_path.string() + " is not valid JSON: " + e.what());
+  }
+  if (o.layer != "static" && o.layer != "distractor" && o.layer != "composite")
+    throw std::invalid_argument("unknown layer '" + o.layer + "' (static, distractor or composite)");
+  const TrainConfig train = config_from_json(cfg.at("train"));
+  const nlohmann::json& run = cfg.at("run");
+  const std::string data_dir = run.at("data_dir").get<std::string>();
+  SceneOptions scene_options;
+  scene_options.downscale = run.at("downscale").get<int>();
+  scene_options.split.rule = SplitRule(run.at("split_rule").get<int>());
+  scene_options.split.every_nth = run.at("split_every_nth").get<int>();
+  const Scene scene = load_colmap_scene(data_dir, scene_options);
+  const Checkpoint ckpt = read_checkpoint(ckpt_path);
+  const GaussianSet statics = gaussians_from_checkpoint(ckpt);
+  std::map<std::string, size_t> buffer_of;  // training view name → distractor buffer
+  const std::vector<std::string> buffer_views = distractor_views_in_checkpoint(ckpt);
+  for (size_t b = 0; b < buffer_views.size(); ++b) buffer_of[buffer_views[b]] = b;
+
+  const std::vector<size_t> chosen = choose_views(scene, o.views, data_dir);
+  const bool wants_distractors = o.layer != "static" || o.mask || o.figure;
+  for (size_t i : chosen) {
+    if (!wants_distractors || buffer_of.count(scene.views[i].name)) continue;
+    const std::string what = o.layer != "static" ? "layer '" + o.layer + "'" : o.mask ? "--mask" : "--figure";
+    if (buffer_views.empty())
+      throw std::invalid_argument(what + " needs a DeSplat model; " + o.model_dir.string() +
+                                  " was trained --static-only (use --layer static)");
+    throw std::invalid_argument(what + ": view '" + scene.views[i].name +
+                                "' is not a training view, so it has no distractors (only --layer static exists there; "
+                                "use --views train)");
+  }
+
+  RasterSettings rs;
+  rs.num_threads = o.threads;
+  rs.active_sh_degree = statics.sh_degree;
+  int written = 0;
+  for (size_t i : chosen) {
+    const SceneView& view = scene.views[i];
+    const auto buffer = buffer_of.find(view.name);
+    GaussianSet distractors;
+    if (buffer != buffer_of.end()) distractors = distractors_from_checkpoint(ckpt, buffer->second);
+    const GaussianSet* d = buffer != buffer_of.end() ? &distractors : nullptr;
+    auto render = [&](const std::array<float, 3>& bg) { return render_view_layers(statics, d, view.camera, rs, bg); };
+    // With --alpha the layer over black is its premultiplied color; otherwise it is shown over
+    // the evaluation background. The mask does not depend on the background.
+    const ViewLayers layers = render(o.alpha ? std::array<float, 3>{0, 0, 0} : train.eval_background);
+    const fs::path stem = o.out_dir / fs::path(view.name).replace_extension();
+    const FloatImage& image = o.layer == "static" ? layers.statics
+                              : o.layer == "distractor" ? layers.distractor
+                                                        : layers.composite;
+    if (o.alpha) {
+      FloatImage alpha = o.layer == "static" ? layers.static_alpha : layers.distractor_alpha;
+      if (o.layer == "composite")
+        for (size_t p = 0; p < alpha.pixels.size(); ++p)
+          alpha.pixels[p] = 1 - (1 - layers.static_alpha.pixels[p]) * (1 - layers.distractor_alpha.pixels[p]);
+      write_image(stem.string() + ".png", with_alpha(image, alpha));
+    } else {
+      write_image(stem.string() + ".png", image);
+    }
+    ++written;
+    if (o.mask) write_image(stem.string() + "_mask.png", distractor_mask(layers)), ++written;
+    if (o.figure) {
+      const FloatImage truth = load_view_image(scene, i);
+      const FloatImage row = layers_figure_row(truth, o.alpha ? render(train.eval_background) : layers);
+      write_image(stem.string() + "_row.png", row), ++written;
+    }
+  }
+  return written;
+}
+
+}  // namespace desplat

@@ -1,0 +1,326 @@
+// desplat_train's job: scene → trainer → progress, evaluation, checkpoints, outputs.
+#include "desplat/jobs/training_run.hpp"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+
+#include "desplat/io/atomic_file.hpp"
+#include "desplat/io/checkpoint.hpp"
+#include "desplat/raster/composite.hpp"
+#include "desplat/io/image_io.hpp"
+#include "desplat/eval/mask_metrics.hpp"
+#include "desplat/io/ply.hpp"
+#include "desplat/sfm/sfm.hpp"
+#include "desplat/train/train_config_json.hpp"
+#include "desplat/train/training_checkpoint.hpp"
+
+namespace desplat {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string format_duration(double s) {
+  char buf[32];
+  const int total = int(std::max(0.0, s));
+  if (total >= 3600) std::snprintf(buf, sizeof buf, "%dh%02dm", total / 3600, total / 60 % 60);
+  else std::snprintf(buf, sizeof buf, "%dm%02ds", total / 60, total % 60);
+  return buf;
+}
+
+// One progress line: rewritten in place on a terminal, printed every `log_every` steps
+// otherwise.
+class Progress {
+ public:
+  Progress(int64_t total, int log_every) : total_(total), log_every_(log_every), tty_(isatty(fileno(stdout))) {}
+  void update(const StepStats& s, double elapsed, int64_t done_this_run) {
+    const int64_t step = s.step + 1;
+    const bool due = tty_ ? (Clock::now() - last_ > std::chrono::milliseconds(200) || step == total_)
+                          : (step % std::max(1, log_every_) == 0 || step == total_);
+    if (!due) return;
+    last_ = Clock::now();
+    const double rate = done_this_run / std::max(elapsed, 1e-9);
+    const double eta = (total_ - step) / std::max(rate, 1e-9);
+    char line[256];
+    std::snprintf(line, sizeof line, "%6lld/%lld %3d%% ETA %s  loss %.4f  psnr %.2f  %zu Gaussians  %.2f it/s",
+                  (long long)step, (long long)total_, int(100 * step / total_), format_duration(eta).c_str(), s.loss,
+                  s.psnr, s.gaussians, rate);
+    if (tty_) {
+      const int width = 20, filled = int(width * step / total_);
+      std::printf("\r[%s%s] %s\033[K", std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(), line);
+      if (step == total_) std::printf("\n");
+    } else {
+      std::printf("%s\n", line);
+    }
+    std::fflush(stdout);
+  }
+  void newline_if_tty() {
+    if (tty_) std::printf("\n");
+  }
+
+ private:
+  int64_t total_;
+  int log_every_;
+  bool tty_;
+  Clock::time_point last_{};
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+json metrics_json(const std::vector<ViewMetrics>& m) {
+  json per = json::array();
+  double psnr_sum = 0, ssim_sum = 0;
+  for (const ViewMetrics& v : m) {
+    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}});
+    psnr_sum += v.psnr, ssim_sum += v.ssim;
+  }
+  const double n = std::max<size_t>(1, m.size());
+  return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
+}
+
+// Distractor-mask quality against the scene's ground truth (issue 6 item 7); null without masks.
+json mask_json(const MaskMetrics& m) {
+  if (m.views.empty()) return nullptr;
+  json per = json::array();
+  for (const ViewMaskMetrics& v : m.views)
+    per.push_back({{"name", v.name},
+                   {"iou", v.score.iou},
+                   {"predicted_fraction", v.score.predicted_fraction},
+                   {"truth_fraction", v.score.truth_fraction}});
+  return {{"views", per},
+          {"mean_iou", m.mean_iou},
+          {"occluded_views", m.occluded_views},
+          {"mean_clean_view_false_positive", m.mean_clean_view_false_positive},
+          {"clean_views", m.clean_views}};
+}
+
+// Parameter memory in MB (float32), the "model size" of the paper's Tables A3/A4.
+double parameter_mb(const TrainableGaussians& g) {
+  size_t floats = 0;
+  for (int k = 0; k < kParamGroups; ++k) floats += g.param(ParamGroup(k)).size();
+  return double(floats) * sizeof(float) / (1024.0 * 1024.0);
+}
+
+// Sizes and memory of both kinds of Gaussians (the paper's Tables A3/A4).
+json model_cost(const Trainer& t) {
+  json per_view = json::array();
+  double distractor_mb = 0;
+  size_t nonempty = 0;
+  for (size_t v = 0; v < t.distractors().size(); ++v) {
+    const TrainableGaussians& d = t.distractors()[v];
+    per_view.push_back({{"name", t.data().train[v].name}, {"count", d.size()}});
+    distractor_mb += parameter_mb(d);
+    nonempty += d.size() > 0;
+  }
+  return {{"static_gaussians", t.gaussians().size()},
+          {"static_mb", parameter_mb(t.gaussians())},
+          {"distractor_gaussians", t.distractor_count()},
+          {"distractor_mb", distractor_mb},
+          {"views_with_distractors", nonempty},
+          {"distractors_per_view", per_view}};
+}
+
+}  // namespace
+
+TrainingData load_training_data(const Scene& scene) {
+  TrainingData data;
+  data.points = scene.points_xyz;
+  data.colors = scene.points_rgb;
+  data.normalization = scene.normalization;
+  std::vector<TrainView> views(scene.views.size());
+  std::string error;
+#pragma omp parallel for schedule(dynamic)
+  for (size_t i = 0; i < scene.views.size(); ++i) {
+    try {
+      views[i] = {scene.views[i].name, scene.views[i].camera, load_view_image(scene, i)};
+    } catch (const std::exception& e) {
+#pragma omp critical
+      error = e.what();
+    }
+  }
+  if (!error.empty()) throw SceneError(error);
+  for (size_t i = 0; i < views.size(); ++i) (scene.views[i].is_test ? data.test : data.train).push_back(std::move(views[i]));
+  return data;
+}
+
+int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
+  fs::create_directories(opt.out_dir);
+  fs::path data_dir = opt.data_dir;
+  if (!opt.images_dir.empty()) {
+    sfm::SfmOptions sfm_options;
+    sfm_options.images = opt.images_dir;
+    sfm_options.out = opt.out_dir / "sfm";
+    sfm_options.overwrite = true;
+    sfm_options.on_progress = sfm::terminal_progress(stdout, isatty(fileno(stdout)));
+    const sfm::SfmResult r = sfm::run_sfm(sfm_options);
+    std::printf("SfM: %d of %d photos registered, %d points (%.0f s)\n", r.num_registered, r.num_photos, r.num_points,
+                r.seconds);
+    data_dir = sfm_options.out;
+  }
+
+  TrainConfig config;
+  if (!opt.config_file.empty()) {
+    std::ifstream f(opt.config_file);
+    if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
+    json j;
+    try {
+      f >> j;
+    } catch (const json::exception& e) {
+      throw std::invalid_argument("config file " + opt.config_file.string() + " is not valid JSON: " + e.what());
+    }
+    try {
+      config = config_from_json(j, config);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(opt.config_file.string() + ": " + e.what());
+    }
+  }
+  if (opt.iterations) config.iterations = *opt.iterations;
+  if (opt.seed) config.seed = *opt.seed;
+  if (opt.threads) config.threads = *opt.threads;
+  if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
+  if (opt.static_only) config.distractors.enabled = false;
+  if (opt.distractors_per_view) {
+    config.distractors.initial_count = *opt.distractors_per_view;
+    config.distractors.reference_pixels = 0;  // exactly that many, whatever the image size
+  }
+  if (opt.no_distractor_density) config.distractors.density_control = false;
+  if (opt.no_regularization) config.distractors.regularize = false;
+
+  SceneOptions scene_options;
+  scene_options.downscale = opt.downscale;
+  scene_options.split = opt.split;
+  const Scene scene = load_colmap_scene(data_dir, scene_options);
+  const TrainingData data = load_training_data(scene);
+  std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
+              data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
+              data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
+  if (config.distractors.enabled)
+    std::printf("DeSplat: %d distractor Gaussians per training view%s%s\n",
+                data.train.empty() ? 0 : distractor_count_for(data.train[0].camera, config.distractors),
+                config.distractors.density_control ? "" : ", no distractor density control",
+                config.distractors.regularize ? "" : ", no opacity regularizers");
+  else
+    std::printf("static-only (Splatfacto baseline)\n");
+  // Splatfacto's resolution schedule assumes 30k steps; a short run would silently end on
+  // downscaled images and score poorly at full resolution.
+  const int64_t full_resolution_from = config.full_resolution_from();
+  if (full_resolution_from >= config.iterations)
+    std::printf("warning: this run never trains at full resolution (the resolution schedule reaches it at step "
+                "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
+                (long long)full_resolution_from, (long long)config.iterations);
+
+  const json run_json = {{"data_dir", fs::absolute(data_dir).string()},
+                         {"downscale", opt.downscale},
+                         {"split_every_nth", opt.split.every_nth},
+                         {"split_rule", int(opt.split.rule)},
+                         {"static_only", opt.static_only}};
+  write_file_atomically(opt.out_dir / "config.json", json{{"train", config_to_json(config)}, {"run", run_json}}.dump(2));
+
+  Trainer trainer(data, config);
+  const fs::path ckpt_path = opt.out_dir / "checkpoint.ckpt";
+  auto save = [&] { write_checkpoint(ckpt_path, make_training_checkpoint(trainer, {{"run", run_json}})); };
+  if (opt.resume) {
+    if (!fs::exists(ckpt_path))
+      throw std::invalid_argument("--resume: no checkpoint at " + ckpt_path.string());
+    restore_training_checkpoint(trainer, read_checkpoint(ckpt_path));
+    std::printf("resumed from %s at step %lld\n", ckpt_path.c_str(), (long long)trainer.current_step());
+  }
+
+  json history = json::array();
+  const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
+                                     [](const SceneView& v) { return !v.mask_path.empty(); });
+  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
+  Progress progress(config.iterations, opt.log_every);
+  const auto start = Clock::now();
+  const int64_t first = trainer.current_step();
+  while (trainer.current_step() < config.iterations) {
+    if (stop_requested.load()) {
+      save();
+      progress.newline_if_tty();
+      std::printf("interrupted at step %lld; checkpoint written to %s (continue with --resume)\n",
+                  (long long)trainer.current_step(), ckpt_path.c_str());
+      return 130;
+    }
+    const StepStats s = trainer.step();
+    if (config.downscale_at(s.step) == 1) {
+      t_fwd.push_back(s.timings.forward), t_bwd.push_back(s.timings.backward);
+      t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
+      t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
+      dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
+    }
+    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    progress.update(s, elapsed, trainer.current_step() - first);
+    const int64_t done = trainer.current_step();
+    if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
+      json m = metrics_json(trainer.evaluate(data.test));
+      json point = {{"step", done},
+                    {"wall_seconds", std::chrono::duration<double>(Clock::now() - start).count()},
+                    {"mean_psnr", m["mean_psnr"]},
+                    {"mean_ssim", m["mean_ssim"]},
+                    {"gaussians", trainer.gaussians().size()},
+                    {"distractor_gaussians", trainer.distractor_count()}};
+      if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
+      history.push_back(point);
+    }
+    if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
+  }
+  const double wall = std::chrono::duration<double>(Clock::now() - start).count();
+  save();
+
+  // Final evaluation and outputs.
+  const std::vector<ViewMetrics> final_metrics = trainer.evaluate(data.test);
+  for (const TrainView& v : data.test) {
+    fs::path name = fs::path(v.name).replace_extension(".png");
+    const FloatImage render = trainer.render(v.camera, config.eval_background);
+    write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&v.image, &render}));
+  }
+  // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
+  if (config.distractors.enabled)
+    for (size_t v = 0; v < data.train.size(); ++v)
+      write_image(opt.out_dir / "renders" / "train" / fs::path(data.train[v].name).replace_extension(".png"),
+                  layers_figure_row(data.train[v].image, trainer.render_layers(v, config.eval_background)));
+  write_gaussian_ply(opt.out_dir / "point_cloud.ply", trainer.gaussians().params, data.normalization);
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  json metrics = metrics_json(final_metrics);
+  metrics["step"] = trainer.current_step();
+  metrics["gaussians"] = trainer.gaussians().size();
+  metrics["mode"] = config.distractors.enabled ? "desplat" : "static-only";
+  metrics["cost"] = model_cost(trainer);
+  const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
+  metrics["distractor_masks"] = mask_json(masks);
+  metrics["history"] = history;
+  metrics["wall_seconds_this_run"] = wall;
+  metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;
+  metrics["median_step_seconds_full_resolution"] = {{"forward", median(t_fwd)},
+                                                     {"backward", median(t_bwd)},
+                                                     {"loss", median(t_loss)},
+                                                     {"optimizer_and_density", median(t_opt)},
+                                                     {"distractor_branch", median(t_dist)},
+                                                     {"total", median(t_total)},
+                                                     {"distractor_share", median(dist_share)},
+                                                     {"steps_measured", t_fwd.size()}};
+  write_file_atomically(opt.out_dir / "metrics.json", metrics.dump(2));
+  std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
+              (long long)trainer.current_step(), format_duration(wall).c_str(), trainer.gaussians().size(),
+              trainer.distractor_count(), metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());
+  if (!masks.views.empty())
+    std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
+                masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
+  std::printf("outputs in %s: metrics.json, renders/test/%s, point_cloud.ply, checkpoint.ckpt\n",
+              fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
+  return 0;
+}
+
+}  // namespace desplat

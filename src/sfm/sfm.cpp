@@ -1,0 +1,816 @@
+// Structure from motion by running the colmap executable; see include/desplat/sfm.hpp.
+#include "desplat/sfm/sfm.hpp"
+
+#include <OpenImageIO/imageio.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <sstream>
+#include <string_view>
+
+#include "desplat/io/colmap.hpp"
+
+extern char** environ;
+
+namespace desplat::sfm {
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+[[noreturn]] void fail(SfmErrorKind kind, const std::string& message) { throw SfmError(kind, message); }
+
+std::string in_quotes(const fs::path& p) { return "'" + p.string() + "'"; }
+
+// ---- Photos ------------------------------------------------------------------------------
+
+// Formats colmap's image reader (FreeImage) handles that OpenImageIO can also check.
+bool has_image_extension(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  static const char* const kExtensions[] = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm"};
+  return std::any_of(std::begin(kExtensions), std::end(kExtensions), [&](const char* e) { return ext == e; });
+}
+
+// Opening the header catches truncated or mislabelled files before colmap skips them quietly.
+bool header_readable(const fs::path& p) {
+  auto in = OIIO::ImageInput::open(p.string());
+  if (!in) {
+    (void)OIIO::geterror();  // clear OIIO's pending error
+    return false;
+  }
+  const bool ok = in->spec().width > 0 && in->spec().height > 0;
+  in->close();
+  return ok;
+}
+
+struct PhotoScan {
+  std::vector<fs::path> photos;  // relative to the folder, sorted
+  int other_files = 0;           // regular files that are not readable photos
+  fs::path example_other;        // one of them, for the message
+};
+
+PhotoScan scan_photos(const fs::path& dir) {
+  std::error_code ec;
+  if (!fs::exists(dir, ec))
+    fail(SfmErrorKind::BadImages, "the images folder " + in_quotes(dir) +
+                                      " does not exist; pass the folder that holds your photos with --images");
+  if (!fs::is_directory(dir, ec))
+    fail(SfmErrorKind::BadImages,
+         in_quotes(dir) + " is not a folder; --images takes the folder that holds your photos");
+  PhotoScan scan;
+  fs::recursive_directory_iterator it(dir, fs::directory_options::skip_permission_denied, ec);
+  if (ec) fail(SfmErrorKind::BadImages, "cannot list the images folder " + in_quotes(dir) + ": " + ec.message());
+  for (; it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) fail(SfmErrorKind::BadImages, "cannot list the images folder " + in_quotes(dir) + ": " + ec.message());
+    const fs::path& p = it->path();
+    const std::string name = p.filename().string();
+    if (name.empty() || name[0] == '.') {  // hidden files and folders (.DS_Store, .thumbnails)
+      if (it->is_directory(ec)) it.disable_recursion_pending();
+      continue;
+    }
+    if (!it->is_regular_file(ec)) continue;
+    const fs::path rel = p.lexically_relative(dir);
+    // colmap's image list is one name per line.
+    if (has_image_extension(p) && rel.string().find_first_of("\r\n") == std::string::npos && header_readable(p)) {
+      scan.photos.push_back(rel);
+    } else {
+      if (scan.other_files++ == 0) scan.example_other = rel;
+    }
+  }
+  std::sort(scan.photos.begin(), scan.photos.end());
+  return scan;
+}
+
+void check_photos_found(const PhotoScan& scan, const fs::path& dir) {
+  if (!scan.photos.empty()) return;
+  if (scan.other_files == 0)
+    fail(SfmErrorKind::BadImages,
+         "the images folder " + in_quotes(dir) + " is empty; put your photos (JPEG, PNG or TIFF) in it");
+  fail(SfmErrorKind::BadImages, "no readable photos in " + in_quotes(dir) + ": its " +
+                                    std::to_string(scan.other_files) + " file(s) (e.g. " +
+                                    in_quotes(scan.example_other) +
+                                    ") are not JPEG/PNG/TIFF/BMP/PPM images that can be opened");
+}
+
+int resolve_min_registered(const SfmOptions& o, int num_photos) {
+  const std::string found = "found only " + std::to_string(num_photos) + " photo(s) in " + in_quotes(o.images);
+  const auto too_few = [&](int need) {
+    fail(SfmErrorKind::BadImages, found + "; structure from motion needs at least " + std::to_string(need) +
+                                      " overlapping photos (20-200 is typical)");
+  };
+  if (!o.min_registered) {
+    const int wanted = default_min_registered(num_photos);
+    if (num_photos < wanted) too_few(wanted);
+    return wanted;
+  }
+  const int wanted = *o.min_registered;
+  if (wanted < 1) fail(SfmErrorKind::BadOptions, "--min-registered must be at least 1, got " + std::to_string(wanted));
+  if (num_photos < 2) too_few(2);
+  if (num_photos < wanted) fail(SfmErrorKind::BadImages, found + " but --min-registered is " + std::to_string(wanted));
+  return wanted;
+}
+
+// ---- Options -----------------------------------------------------------------------------
+
+void check_camera_model(const std::string& name) {
+  if (colmap::camera_model_from_name(name)) return;
+  std::string names;
+  for (const auto& m : colmap::camera_models()) names += std::string(names.empty() ? "" : ", ") + m.name;
+  fail(SfmErrorKind::BadOptions, "unknown camera model '" + name + "'; use one of " + names);
+}
+
+fs::path require_colmap(const std::string& name) {
+  if (auto path = find_executable(name)) return *path;
+  if (name.find('/') != std::string::npos)
+    fail(SfmErrorKind::ColmapMissing,
+         "the colmap executable " + in_quotes(name) + " does not exist or is not executable");
+  fail(SfmErrorKind::ColmapMissing, "'" + name +
+                                        "' was not found on PATH; install it with scripts/install_deps.sh or "
+                                        "apt-get install colmap (or pass its path with --colmap)");
+}
+
+// ---- Output folder -----------------------------------------------------------------------
+
+struct Layout {
+  fs::path out, images, database, sparse_root, log, image_list;
+  explicit Layout(const fs::path& o)
+      : out(o), images(o / "images"), database(o / "database.db"), sparse_root(o / "sparse"), log(o / "colmap.log"),
+        image_list(o / "image_list.txt") {}
+};
+
+bool is_inside(const fs::path& inner, const fs::path& outer) {
+  const fs::path a = fs::weakly_canonical(inner), b = fs::weakly_canonical(outer);
+  auto [end_b, end_a] = std::mismatch(b.begin(), b.end(), a.begin(), a.end());
+  return end_b == b.end();
+}
+
+// Earlier results are only replaced on request: a mapper run can take hours.
+void clear_earlier_results(const Layout& l, bool overwrite) {
+  std::error_code ec;
+  const fs::path earlier[] = {l.database, l.sparse_root};
+  for (const fs::path& p : earlier) {
+    if (!fs::exists(fs::symlink_status(p, ec))) continue;
+    if (!overwrite)
+      fail(SfmErrorKind::OutputExists,
+           in_quotes(l.out) + " holds results of an earlier run (" + p.filename().string() +
+               "); pass --overwrite to redo structure from motion there, or choose another --out");
+    fs::remove_all(p, ec);
+    if (ec) fail(SfmErrorKind::OutputExists, "cannot remove " + in_quotes(p) + ": " + ec.message());
+  }
+  for (const char* suffix : {"-wal", "-shm", "-journal"}) fs::remove(l.database.string() + suffix, ec);
+}
+
+void copy_photos(const fs::path& from, const fs::path& to, const std::vector<fs::path>& photos) {
+  std::error_code ec;
+  for (const fs::path& rel : photos) {
+    fs::create_directories((to / rel).parent_path(), ec);
+    if (!ec) fs::copy_file(from / rel, to / rel, fs::copy_options::overwrite_existing, ec);
+    if (ec)
+      fail(SfmErrorKind::OutputExists,
+           "cannot copy " + in_quotes(from / rel) + " to " + in_quotes(to / rel) + ": " + ec.message());
+  }
+}
+
+// <out>/images: the input itself, a symlink to it, or a copy of its photos.
+void provide_images(const SfmOptions& o, const Layout& l, const std::vector<fs::path>& photos) {
+  std::error_code ec;
+  const auto st = fs::symlink_status(l.images, ec);
+  if (fs::exists(st)) {
+    if (fs::equivalent(l.images, o.images, ec)) return;  // the input already is <out>/images
+    if (!fs::is_symlink(st))
+      fail(SfmErrorKind::OutputExists,
+           in_quotes(l.images) + " already exists and is not the images folder; remove it or choose another --out");
+    fs::remove(l.images, ec);  // a stale link from an earlier run: removing it loses no data
+  }
+  if (o.copy_images) return copy_photos(o.images, l.images, photos);
+  fs::create_directory_symlink(fs::canonical(o.images), l.images, ec);
+  if (ec)
+    fail(SfmErrorKind::OutputExists, "cannot create the symlink " + in_quotes(l.images) + ": " + ec.message() +
+                                         "; pass --copy-images to copy the photos instead");
+}
+
+void write_image_list(const fs::path& path, const std::vector<fs::path>& photos) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  for (const fs::path& p : photos) f << p.generic_string() << '\n';
+  if (!f.flush()) fail(SfmErrorKind::OutputExists, "cannot write " + in_quotes(path));
+}
+
+void prepare_output(const SfmOptions& o, const Layout& l, const std::vector<fs::path>& photos) {
+  std::error_code ec;
+  if (is_inside(o.out, o.images))
+    fail(SfmErrorKind::OutputExists, "--out " + in_quotes(o.out) + " is inside the images folder " +
+                                         in_quotes(o.images) + "; choose an --out outside it");
+  fs::create_directories(o.out, ec);
+  if (ec || !fs::is_directory(o.out))
+    fail(SfmErrorKind::OutputExists,
+         "cannot create the output folder " + in_quotes(o.out) + (ec ? ": " + ec.message() : ""));
+  clear_earlier_results(l, o.overwrite);
+  provide_images(o, l, photos);
+  write_image_list(l.image_list, photos);
+}
+
+// ---- Child process -----------------------------------------------------------------------
+
+struct ChildExit {
+  bool signaled = false;
+  int code = 0;  // exit status, or the signal number
+  bool ok() const { return !signaled && code == 0; }
+};
+
+// Kills and reaps the child if we leave early (an exception while reading its output).
+class ChildGuard {
+ public:
+  explicit ChildGuard(pid_t pid) : pid_(pid) {}
+  ChildGuard(const ChildGuard&) = delete;
+  ChildGuard& operator=(const ChildGuard&) = delete;
+  ~ChildGuard() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGTERM);
+    int status = 0;
+    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+    }
+  }
+  ChildExit wait() {
+    int status = 0;
+    pid_t r;
+    while ((r = ::waitpid(pid_, &status, 0)) < 0 && errno == EINTR) {
+    }
+    pid_ = -1;
+    if (r < 0) return {true, 0};
+    if (WIFSIGNALED(status)) return {true, WTERMSIG(status)};
+    return {false, WEXITSTATUS(status)};
+  }
+
+ private:
+  pid_t pid_;
+};
+
+class Fd {
+ public:
+  explicit Fd(int fd = -1) : fd_(fd) {}
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  ~Fd() { reset(); }
+  int get() const { return fd_; }
+  void reset() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+
+ private:
+  int fd_;
+};
+
+class SpawnActions {
+ public:
+  SpawnActions() { posix_spawn_file_actions_init(&fa_); }
+  SpawnActions(const SpawnActions&) = delete;
+  SpawnActions& operator=(const SpawnActions&) = delete;
+  ~SpawnActions() { posix_spawn_file_actions_destroy(&fa_); }
+  posix_spawn_file_actions_t* get() { return &fa_; }
+
+ private:
+  posix_spawn_file_actions_t fa_;
+};
+
+class SpawnAttr {
+ public:
+  // Default signal dispositions and an empty mask, whatever the caller ignores or blocks
+  // (an ignored SIGPIPE or SIGINT would otherwise be inherited by colmap).
+  SpawnAttr() {
+    posix_spawnattr_init(&attr_);
+    sigset_t none, defaults;
+    sigemptyset(&none);
+    sigemptyset(&defaults);
+    for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaddset(&defaults, sig);
+    posix_spawnattr_setsigmask(&attr_, &none);
+    posix_spawnattr_setsigdefault(&attr_, &defaults);
+    posix_spawnattr_setflags(&attr_, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  }
+  SpawnAttr(const SpawnAttr&) = delete;
+  SpawnAttr& operator=(const SpawnAttr&) = delete;
+  ~SpawnAttr() { posix_spawnattr_destroy(&attr_); }
+  const posix_spawnattr_t* get() const { return &attr_; }
+
+ private:
+  posix_spawnattr_t attr_;
+};
+
+// Runs argv[0] (an absolute path; no shell, so paths need no quoting) with stdin from
+// /dev/null and stdout+stderr into one pipe, handing each chunk of output to on_output.
+ChildExit run_process(const std::vector<std::string>& argv, const std::function<void(std::string_view)>& on_output) {
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0)
+    fail(SfmErrorKind::StageFailed, std::string("cannot create a pipe: ") + std::strerror(errno));
+  Fd read_end(fds[0]), write_end(fds[1]);
+  SpawnActions actions;
+  posix_spawn_file_actions_addopen(actions.get(), 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_adddup2(actions.get(), write_end.get(), 1);
+  posix_spawn_file_actions_adddup2(actions.get(), write_end.get(), 2);
+  std::vector<char*> cargv;
+  for (const std::string& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
+  cargv.push_back(nullptr);
+  pid_t pid = 0;
+  const SpawnAttr attr;
+  const int err = ::posix_spawn(&pid, cargv[0], actions.get(), attr.get(), cargv.data(), environ);
+  if (err != 0) fail(SfmErrorKind::StageFailed, "cannot start " + in_quotes(argv[0]) + ": " + std::strerror(err));
+  ChildGuard child(pid);
+  write_end.reset();  // EOF arrives once the child (and anything it started) closes the pipe
+  char buf[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    on_output(std::string_view(buf, static_cast<size_t>(n)));
+  }
+  return child.wait();
+}
+
+// ---- Progress parsing --------------------------------------------------------------------
+
+// "12/50" at the start of s.
+bool parse_fraction(std::string_view s, int& a, int& b) {
+  const char* end = s.data() + s.size();
+  auto r1 = std::from_chars(s.data(), end, a);
+  if (r1.ec != std::errc() || r1.ptr == end || *r1.ptr != '/') return false;
+  auto r2 = std::from_chars(r1.ptr + 1, end, b);
+  return r2.ec == std::errc();
+}
+
+// Rest of `line` after `prefix`, or nullopt.
+std::optional<std::string_view> after(std::string_view line, std::string_view prefix) {
+  const size_t at = line.find(prefix);
+  if (at == std::string_view::npos) return std::nullopt;
+  return line.substr(at + prefix.size());
+}
+
+// Turns colmap's output lines into progress reports.
+class ProgressParser {
+ public:
+  ProgressParser(SfmStage stage, int total, const char* unit) {
+    p_.stage = stage;
+    p_.total = total;
+    p_.unit = unit;
+  }
+  const SfmProgress& current() const { return p_; }
+
+  // True when the line changed the progress.
+  bool feed(std::string_view line) {
+    switch (p_.stage) {
+      case SfmStage::Extract: return feed_fraction(line, "Processed file [", "image");
+      case SfmStage::Match: return feed_match(line);
+      case SfmStage::Map: return feed_map(line);
+    }
+    return false;
+  }
+
+ private:
+  bool feed_fraction(std::string_view line, std::string_view prefix, const char* unit) {
+    const auto rest = after(line, prefix);
+    int a = 0, b = 0;
+    if (!rest || !parse_fraction(*rest, a, b)) return false;
+    p_.done = a, p_.total = b, p_.unit = unit;
+    return true;
+  }
+  // Exhaustive: "Matching block [i/n, j/n]" (n² blocks); sequential, spatial: "Matching image [i/n]".
+  bool feed_match(std::string_view line) {
+    if (feed_fraction(line, "Matching image [", "image")) return true;
+    const auto rest = after(line, "Matching block [");
+    int i = 0, n = 0, j = 0, m = 0;
+    if (!rest || !parse_fraction(*rest, i, n)) return false;
+    const auto second = after(*rest, ", ");
+    if (!second || !parse_fraction(*second, j, m)) return false;
+    p_.done = (i - 1) * m + j, p_.total = n * m, p_.unit = "block";
+    return true;
+  }
+  bool feed_map(std::string_view line) {
+    if (after(line, "Initializing with image pair #")) {
+      if (started_) ++p_.model;
+      started_ = true;
+      p_.done = 2;
+      return true;
+    }
+    if (const auto rest = after(line, "Registering image #")) {  // "#6 (3)": 3 once registered
+      const auto open = rest->find('(');
+      int n = 0;
+      if (open == std::string_view::npos) return false;
+      const std::string_view num = rest->substr(open + 1);
+      if (std::from_chars(num.data(), num.data() + num.size(), n).ec != std::errc()) return false;
+      p_.done = n;
+      return true;
+    }
+    if (after(line, "=> Could not register")) {
+      p_.done = std::max(0, p_.done - 1);
+      return true;
+    }
+    return false;
+  }
+
+  SfmProgress p_;
+  bool started_ = false;
+};
+
+// Splits a byte stream into lines at '\n' or '\r'.
+class LineSplitter {
+ public:
+  template <class F>
+  void feed(std::string_view chunk, F&& on_line) {
+    for (char c : chunk) {
+      if (c == '\n' || c == '\r') {
+        on_line(std::string_view(line_));
+        line_.clear();
+      } else if (line_.size() < 4096) {  // a runaway line cannot grow without bound
+        line_ += c;
+      }
+    }
+  }
+  template <class F>
+  void finish(F&& on_line) {
+    if (!line_.empty()) on_line(std::string_view(line_));
+    line_.clear();
+  }
+
+ private:
+  std::string line_;
+};
+
+// ---- Stages ------------------------------------------------------------------------------
+
+struct Context {
+  fs::path colmap;
+  Layout layout;
+  std::ofstream log;
+  ProgressFn on_progress;
+  int num_photos = 0;
+};
+
+void report(const Context& c, const SfmProgress& p) {
+  if (c.on_progress) c.on_progress(p);
+}
+
+struct StageOutput {
+  ChildExit exit;
+  double seconds = 0;
+  std::deque<std::string> tail;  // last non-blank lines
+  SfmProgress last;
+};
+
+std::string command_line(const std::vector<std::string>& argv) {
+  std::string s;
+  for (const std::string& a : argv) s += (s.empty() ? "" : " ") + a;
+  return s;
+}
+
+// One colmap command; `total`/`unit` seed the progress until colmap reports its own.
+StageOutput run_stage(Context& c, SfmStage stage, const std::string& command, std::vector<std::string> args, int total,
+                      const char* unit = "image") {
+  args.insert(args.begin(), {c.colmap.string(), command});
+  c.log << "\n######## desplat_sfm: colmap " << command << "\n$ " << command_line(args) << "\n" << std::flush;
+  ProgressParser parser(stage, total, unit);
+  report(c, parser.current());
+  StageOutput out;
+  auto on_line = [&](std::string_view line) {
+    if (line.find_first_not_of(" \t") == std::string_view::npos) return;
+    out.tail.emplace_back(line);
+    if (out.tail.size() > 12) out.tail.pop_front();
+    if (parser.feed(line)) report(c, parser.current());
+  };
+  LineSplitter lines;
+  const auto t0 = Clock::now();
+  out.exit = run_process(args, [&](std::string_view chunk) {
+    c.log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+    c.log.flush();  // so `tail -f colmap.log` follows along
+    lines.feed(chunk, on_line);
+  });
+  lines.finish(on_line);
+  out.seconds = seconds_since(t0);
+  c.log << "\n######## colmap " << command << " " << (out.exit.signaled ? "killed by signal " : "exited with code ")
+        << out.exit.code << " after " << out.seconds << " s\n"
+        << std::flush;
+  out.last = parser.current();
+  return out;
+}
+
+std::string tail_text(const StageOutput& s) {
+  if (s.tail.empty()) return "  (it printed nothing)\n";
+  std::string t;
+  for (const std::string& line : s.tail) t += "  | " + line + "\n";
+  return t;
+}
+
+[[noreturn]] void stage_failed(const Context& c, const std::string& command, const StageOutput& s) {
+  std::string what;
+  if (s.exit.signaled) {
+    what = "was killed by signal " + std::to_string(s.exit.code) + " (" + strsignal(s.exit.code) + ")";
+    if (s.exit.code == SIGKILL) what += "; if the machine ran out of memory, try fewer --threads or smaller photos";
+  } else {
+    what = "failed with exit code " + std::to_string(s.exit.code);
+  }
+  fail(SfmErrorKind::StageFailed, "colmap " + command + " " + what + ". Its last lines:\n" + tail_text(s) +
+                                      "The full output is in " + in_quotes(c.layout.log));
+}
+
+void finish_stage(Context& c, const std::string& command, const StageOutput& s) {
+  if (!s.exit.ok()) stage_failed(c, command, s);
+  SfmProgress done = s.last;
+  done.finished = true;
+  if (done.total > 0) done.done = done.total;
+  report(c, done);
+}
+
+std::string threads(int n) { return std::to_string(n); }
+
+std::vector<std::string> extract_args(const SfmOptions& o, const Layout& l) {
+  return {"--database_path", l.database.string(), "--image_path", l.images.string(), "--image_list_path",
+          l.image_list.string(), "--ImageReader.camera_model", o.camera_model, "--ImageReader.single_camera",
+          o.single_camera ? "1" : "0", "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads",
+          threads(o.num_threads), "--log_to_stderr", "1"};
+}
+
+// About 25 blocks, so the matching progress moves; the set of image pairs is the same.
+int exhaustive_block_size(int num_photos) { return std::clamp((num_photos + 4) / 5, 10, 50); }
+
+std::vector<std::string> match_args(const SfmOptions& o, const Layout& l, Matcher m, int num_photos) {
+  std::vector<std::string> a = {"--database_path", l.database.string(), "--SiftMatching.use_gpu", "0",
+                                "--SiftMatching.num_threads", threads(o.num_threads), "--log_to_stderr", "1"};
+  if (m == Matcher::Exhaustive)
+    a.insert(a.end(), {"--ExhaustiveMatching.block_size", std::to_string(exhaustive_block_size(num_photos))});
+  return a;
+}
+
+// colmap drops sub-models smaller than min(10, #photos); a lower floor keeps a small
+// partial model so the user hears "only N of M" (and can accept it) instead of "no model".
+std::vector<std::string> map_args(const SfmOptions& o, const Layout& l, int min_registered) {
+  return {"--database_path", l.database.string(), "--image_path", l.images.string(), "--output_path",
+          l.sparse_root.string(), "--Mapper.num_threads", threads(o.num_threads), "--Mapper.min_model_size",
+          std::to_string(std::min(min_registered, 3)), "--log_to_stderr", "1"};
+}
+
+StageOutput run_matching(Context& c, const SfmOptions& o, Matcher m) {
+  const std::string command = std::string(matcher_name(m)) + "_matcher";
+  auto args = match_args(o, c.layout, m, c.num_photos);
+  if (m != Matcher::Exhaustive) return run_stage(c, SfmStage::Match, command, std::move(args), c.num_photos);
+  const int block = exhaustive_block_size(c.num_photos), blocks = (c.num_photos + block - 1) / block;
+  return run_stage(c, SfmStage::Match, command, std::move(args), blocks * blocks, "block");
+}
+
+// ---- Models ------------------------------------------------------------------------------
+
+struct ModelInfo {
+  fs::path dir;
+  int registered = -1;  // -1: unreadable
+  int points = 0;
+  std::string error;  // why it is unreadable
+};
+
+bool is_number(const std::string& s) {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char ch) { return std::isdigit(ch); });
+}
+
+// mapper's numbered model folders, largest first (ties: lower number first).
+std::vector<ModelInfo> collect_models(const fs::path& sparse_root) {
+  std::vector<std::pair<long, ModelInfo>> found;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(sparse_root, ec)) {
+    const std::string name = e.path().filename().string();
+    if (!e.is_directory(ec) || !is_number(name) || name.size() > 9) continue;
+    ModelInfo info;
+    info.dir = e.path();
+    try {
+      const colmap::Model m = colmap::read_model_binary(e.path());
+      info.registered = static_cast<int>(m.images.size());
+      info.points = static_cast<int>(m.points.size());
+    } catch (const colmap::ColmapError& err) {
+      info.error = err.what();  // ranked last; it keeps a numbered folder so nothing is lost
+    }
+    found.emplace_back(std::stol(name), info);
+  }
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) {
+    return a.second.registered != b.second.registered ? a.second.registered > b.second.registered : a.first < b.first;
+  });
+  std::vector<ModelInfo> models;
+  for (auto& f : found) models.push_back(f.second);
+  return models;
+}
+
+// Renames the ranked models to sparse/0, sparse/1, … (via temporary names, so no clashes).
+void renumber_models(std::vector<ModelInfo>& models, const fs::path& sparse_root) {
+  std::error_code ec;
+  for (size_t i = 0; i < models.size(); ++i) {
+    const fs::path tmp = sparse_root / (".renumber_" + std::to_string(i));
+    fs::rename(models[i].dir, tmp, ec);
+    if (ec) fail(SfmErrorKind::OutputExists, "cannot rename " + in_quotes(models[i].dir) + ": " + ec.message());
+    models[i].dir = tmp;
+  }
+  for (size_t i = 0; i < models.size(); ++i) {
+    const fs::path final_dir = sparse_root / std::to_string(i);
+    fs::rename(models[i].dir, final_dir, ec);
+    if (ec) fail(SfmErrorKind::OutputExists, "cannot rename " + in_quotes(models[i].dir) + ": " + ec.message());
+    models[i].dir = final_dir;
+  }
+}
+
+const char* kPhotoAdvice =
+    "take more overlapping photos: every part of the scene in at least 3 sharp photos, taken a step apart "
+    "(not from one spot), with texture in view";
+
+// What the chosen matcher assumes, when that may be why photos were not connected.
+std::string matcher_hint(Matcher m) {
+  if (m == Matcher::Sequential)
+    return " Sequential matching assumes the file names are in capture order; if not, use --matcher exhaustive.";
+  if (m == Matcher::Spatial)
+    return " Spatial matching pairs photos by the GPS positions in their EXIF data; without those nothing is "
+           "matched: use --matcher exhaustive or sequential.";
+  return "";
+}
+
+// colmap 3.8's mapper exits 1 with this when it has nothing to write (exit 1 alone could
+// also be, e.g., a bad option).
+bool said_no_model(const StageOutput& s) {
+  return std::any_of(s.tail.begin(), s.tail.end(), [](const std::string& line) {
+    return line.find("failed to create sparse model") != std::string::npos;
+  });
+}
+
+[[noreturn]] void no_model(const Context& c, Matcher m, const StageOutput& s) {
+  fail(SfmErrorKind::NoModel, "colmap could not build a model: no two of the " + std::to_string(c.num_photos) +
+                                  " photos matched well enough to start a reconstruction; " + kPhotoAdvice + "." +
+                                  matcher_hint(m) + " colmap mapper's last lines:\n" + tail_text(s) +
+                                  "The full output is in " + in_quotes(c.layout.log));
+}
+
+void check_registered(const Context& c, Matcher m, const ModelInfo& best, int min_registered) {
+  if (best.registered >= min_registered) return;
+  fail(SfmErrorKind::TooFewRegistered,
+       "only " + std::to_string(best.registered) + " of " + std::to_string(c.num_photos) +
+           " photos could be placed (at least " + std::to_string(min_registered) + " needed); " + kPhotoAdvice + "." +
+           matcher_hint(m) + " The partial model is kept in " + in_quotes(best.dir) +
+           "; to use it anyway, run again with --overwrite --min-registered " + std::to_string(best.registered) +
+           ". Details: " + in_quotes(c.layout.log));
+}
+
+}  // namespace
+
+// ---- Public ------------------------------------------------------------------------------
+
+std::optional<Matcher> matcher_from_name(const std::string& name) {
+  for (Matcher m : {Matcher::Auto, Matcher::Exhaustive, Matcher::Sequential, Matcher::Spatial})
+    if (name == matcher_name(m)) return m;
+  return std::nullopt;
+}
+
+const char* matcher_name(Matcher matcher) {
+  switch (matcher) {
+    case Matcher::Auto: return "auto";
+    case Matcher::Exhaustive: return "exhaustive";
+    case Matcher::Sequential: return "sequential";
+    case Matcher::Spatial: return "spatial";
+  }
+  return "?";
+}
+
+Matcher choose_matcher(Matcher requested, int num_images) {
+  if (requested != Matcher::Auto) return requested;
+  return num_images <= kExhaustiveMaxImages ? Matcher::Exhaustive : Matcher::Sequential;
+}
+
+int default_min_registered(int num_images) { return std::max(3, (num_images + 1) / 2); }
+
+std::string describe(const SfmProgress& p) {
+  std::ostringstream s;
+  const auto count = [&](int done, int total) {
+    s << done;
+    if (total > 0) s << "/" << total;
+  };
+  switch (p.stage) {
+    case SfmStage::Extract: s << "extracting features: image "; count(p.done, p.total); break;
+    case SfmStage::Match: s << "matching: " << p.unit << " "; count(p.done, p.total); break;
+    case SfmStage::Map:
+      s << "mapping: ";
+      if (p.model > 1) s << "model " << p.model << ", ";
+      s << "registered ";
+      count(p.done, p.total);
+      s << " photos";
+      break;
+  }
+  if (p.finished) s << ", done";
+  return s.str();
+}
+
+ProgressFn terminal_progress(std::FILE* out, bool is_tty, double plain_interval_s) {
+  struct State {
+    bool any = false;
+    SfmStage stage = SfmStage::Extract;
+    Clock::time_point last;
+  };
+  auto state = std::make_shared<State>();
+  return [out, is_tty, plain_interval_s, state](const SfmProgress& p) {
+    const bool new_stage = !state->any || p.stage != state->stage;
+    const double interval = is_tty ? 0.1 : plain_interval_s;
+    if (!new_stage && !p.finished && seconds_since(state->last) < interval) return;
+    state->any = true, state->stage = p.stage, state->last = Clock::now();
+    if (is_tty)
+      std::fprintf(out, "\r\033[K%s%s", describe(p).c_str(), p.finished ? "\n" : "");
+    else
+      std::fprintf(out, "%s\n", describe(p).c_str());
+    std::fflush(out);
+  };
+}
+
+std::vector<fs::path> find_photos(const fs::path& dir) { return scan_photos(dir).photos; }
+
+std::optional<fs::path> find_executable(const std::string& name) {
+  if (name.empty()) return std::nullopt;
+  const auto usable = [](const fs::path& p) {
+    std::error_code ec;
+    return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
+  };
+  if (name.find('/') != std::string::npos) {
+    if (usable(name)) return fs::absolute(name);
+    return std::nullopt;
+  }
+  const char* path_env = std::getenv("PATH");
+  std::string_view rest = path_env ? path_env : "";
+  while (path_env) {
+    const size_t colon = rest.find(':');
+    const std::string_view dir = rest.substr(0, colon);
+    const fs::path candidate = fs::path(dir.empty() ? "." : std::string(dir)) / name;  // POSIX: empty = cwd
+    if (usable(candidate)) return fs::absolute(candidate);
+    if (colon == std::string_view::npos) break;
+    rest.remove_prefix(colon + 1);
+  }
+  return std::nullopt;
+}
+
+SfmResult run_sfm(const SfmOptions& o) {
+  const auto t0 = Clock::now();
+  check_camera_model(o.camera_model);
+  const fs::path colmap_exe = require_colmap(o.colmap);
+  const PhotoScan scan = scan_photos(o.images);
+  check_photos_found(scan, o.images);
+  const int num_photos = static_cast<int>(scan.photos.size());
+  const int min_registered = resolve_min_registered(o, num_photos);
+
+  Context c{colmap_exe, Layout(o.out), {}, o.on_progress, num_photos};
+  prepare_output(o, c.layout, scan.photos);
+  c.log.open(c.layout.log, std::ios::binary | std::ios::trunc);
+  if (!c.log) fail(SfmErrorKind::OutputExists, "cannot write the log file " + in_quotes(c.layout.log));
+
+  const StageOutput extract =
+      run_stage(c, SfmStage::Extract, "feature_extractor", extract_args(o, c.layout), num_photos);
+  finish_stage(c, "feature_extractor", extract);
+  const Matcher matcher = choose_matcher(o.matcher, num_photos);
+  const StageOutput match = run_matching(c, o, matcher);
+  finish_stage(c, std::string(matcher_name(matcher)) + "_matcher", match);
+
+  std::error_code ec;
+  fs::create_directories(c.layout.sparse_root, ec);
+  const StageOutput map = run_stage(c, SfmStage::Map, "mapper", map_args(o, c.layout, min_registered), num_photos);
+  std::vector<ModelInfo> models = collect_models(c.layout.sparse_root);
+  const bool have_model = !models.empty() && models[0].registered > 0;
+  if (!map.exit.signaled && !models.empty() && models[0].registered < 0)
+    fail(SfmErrorKind::NoModel, "colmap mapper wrote a model that cannot be read: " + models[0].error +
+                                    ". The full output is in " + in_quotes(c.layout.log));
+  if (!have_model && (map.exit.ok() || said_no_model(map))) no_model(c, matcher, map);
+  if (!map.exit.ok() || !have_model) stage_failed(c, "mapper", map);
+  renumber_models(models, c.layout.sparse_root);
+
+  SfmProgress done = map.last;
+  done.model = 1, done.done = models[0].registered, done.finished = true;
+  report(c, done);
+  check_registered(c, matcher, models[0], min_registered);
+
+  SfmResult r;
+  r.images_dir = c.layout.images;
+  r.sparse_dir = models[0].dir;
+  r.database = c.layout.database;
+  r.log = c.layout.log;
+  r.matcher = matcher;
+  r.num_photos = num_photos;
+  r.num_registered = models[0].registered;
+  r.num_points = models[0].points;
+  r.num_models = static_cast<int>(models.size());
+  r.seconds = seconds_since(t0);
+  r.extract_seconds = extract.seconds, r.match_seconds = match.seconds, r.map_seconds = map.seconds;
+  return r;
+}
+
+}  // namespace desplat::sfm

@@ -1,0 +1,3 @@
+// Fixture for the layer check's own test: core must not include train.
+#pragma once
+#include "desplat/train/trainer.hpp"
