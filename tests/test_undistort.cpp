@@ -16,6 +16,7 @@
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/io/undistort.hpp"
+#include "support/fox_scene.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;
@@ -23,7 +24,7 @@ using colmap::CameraModelId;
 
 namespace {
 
-const fs::path kFox = "/work/shared/data/fox";
+const fs::path kFox = desplat::testing::fox_dir();
 const std::vector<std::string> kSubset = {"0001.jpg", "0042.jpg", "0115.jpg"};  // first, 25th, last
 
 // Runs COLMAP once for the whole file.
