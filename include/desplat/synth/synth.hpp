@@ -1,4 +1,4 @@
-// Synthetic scenes with known ground truth (issue 6): a textured static world of planes, boxes
+// Synthetic scenes with known ground truth: a textured static world of planes, boxes
 // and spheres, photographed along an orbit or a forward-facing path, written in the layout a
 // user brings (images/ + a binary COLMAP sparse/0) plus what no real capture has: the clean
 // image of every view and the distractor mask of every training view.
