@@ -18,8 +18,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using detail::size_text;
-using detail::unassociated_alpha;
 
 // The first channel of any image file, scaled to [0, 1] by its format's full range.
 // Values as stored (unassociated_alpha).

@@ -1,15 +1,12 @@
-// Small helpers shared by src/io/distractor_masks.cpp (mask loading) and src/io/occluders.cpp
-// (desplat_occlude). Internal to desplat; not installed.
+// Small helpers shared by the io layer's image readers (distractor masks, photo files).
+// Private to the io layer.
 #pragma once
 
 #include <OpenImageIO/imageio.h>
 
 #include <string>
 
-namespace desplat::detail {
-
-// "WxH", as error messages print image sizes.
-inline std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+namespace desplat {
 
 // Open config that reads values as stored: by default OpenImageIO would multiply colour by a
 // file's alpha channel.
@@ -19,4 +16,4 @@ inline OIIO::ImageSpec unassociated_alpha() {
   return config;
 }
 
-}  // namespace desplat::detail
+}  // namespace desplat

@@ -3,8 +3,6 @@
 // See include/desplat/occluders.hpp for what is written; the mask layout is masks.hpp's.
 #include "desplat/synth/occluders.hpp"
 
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -17,7 +15,7 @@
 
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/masks.hpp"
-#include "io/image_read_helpers.hpp"
+#include "desplat/io/photo_file.hpp"
 
 namespace desplat {
 
@@ -25,8 +23,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using detail::size_text;
-using detail::unassociated_alpha;
 
 std::string number_text(double v) {
   char buf[32];
@@ -71,52 +67,33 @@ struct Size {
   int width = 0, height = 0;
 };
 
-// A photo's pixels as float [H, W, C] in [0, 1], with the spec needed to write it back.
-struct Photo {
-  OIIO::ImageSpec spec;
-  std::string format;  // OpenImageIO's format name, e.g. "jpeg"
-  std::vector<float> pixels;
-};
+// The io layer's photo-file calls with their errors in this tool's type.
+template <class Fn> auto image_io(Fn&& fn) {
+  try {
+    return fn();
+  } catch (const ImageError& e) {
+    throw OccludeError(e.what());
+  }
+}
 
-Photo read_photo(const fs::path& path) {
-  const OIIO::ImageSpec config = unassociated_alpha();
-  auto in = OIIO::ImageInput::open(path.string(), &config);
-  if (!in) throw OccludeError(path.string() + ": cannot read the image: " + OIIO::geterror());
-  Photo p{in->spec(), in->format_name(), {}};
-  p.pixels.resize(size_t(p.spec.width) * p.spec.height * p.spec.nchannels);
-  if (!in->read_image(0, 0, 0, p.spec.nchannels, OIIO::TypeDesc::FLOAT, p.pixels.data()))
-    throw OccludeError(path.string() + ": cannot decode the image: " + in->geterror());
-  return p;
+PhotoFile read_photo(const fs::path& path) {
+  return image_io([&] { return read_photo_file(path); });
 }
 
 Size read_size(const fs::path& path) {
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) throw OccludeError(path.string() + ": cannot read the image: " + OIIO::geterror());
-  return {in->spec().width, in->spec().height};
+  return image_io([&] {
+    const std::array<int, 2> s = read_image_size(path);
+    return Size{s[0], s[1]};
+  });
 }
 
-// Same name, same format and bit depth; lossy formats at high quality so that the pixels
-// outside the occluders change only by re-encoding noise.
-void write_photo(const fs::path& path, const Photo& p) {
-  OIIO::ImageSpec spec = p.spec;  // keeps the metadata (e.g. EXIF orientation)
-  spec.attribute("oiio:UnassociatedAlpha", 1);  // write the pixels as read
-  if (p.format == "jpeg") {
-    spec.attribute("Compression", "jpeg:95");
-    spec.attribute("jpeg:subsampling", "4:4:4");  // no chroma bleeding across occluder edges
-  }
-  auto out = OIIO::ImageOutput::create(path.string());
-  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, p.pixels.data()) ||
-      !out->close())
-    throw OccludeError(path.string() + ": cannot write the image: " + OIIO::geterror());
+void write_photo(const fs::path& path, const PhotoFile& p) {
+  image_io([&] { write_photo_file(path, p); });
 }
 
 void write_mask(const fs::path& path, const cv::Mat& mask) {
   make_dirs(path.parent_path());
-  auto out = OIIO::ImageOutput::create(path.string());
-  const OIIO::ImageSpec spec(mask.cols, mask.rows, 1, OIIO::TypeDesc::UINT8);
-  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, mask.data) ||
-      !out->close())
-    throw OccludeError(path.string() + ": cannot write the mask: " + OIIO::geterror());
+  image_io([&] { write_mask_u8(path, mask.cols, mask.rows, mask.data); });
 }
 
 // ---- Shapes: a footprint (255 = covered) of the image's size ----
@@ -250,22 +227,22 @@ std::vector<Placed> place_occluders(Random& rng, int W, int H, const OccludeOpti
 }
 
 // Paints the occluders in order (later ones on top) into `photo` and returns their union.
-cv::Mat paint(Photo& photo, const std::vector<Placed>& placed, const fs::path& images_dir) {
-  const int W = photo.spec.width, H = photo.spec.height, C = photo.spec.nchannels;
+cv::Mat paint(PhotoFile& photo, const std::vector<Placed>& placed, const fs::path& images_dir) {
+  const int W = photo.image.width, H = photo.image.height, C = photo.image.channels;
   cv::Mat covered = cv::Mat::zeros(H, W, CV_8U);
   for (const Placed& p : placed) {
     const Occluder& o = p.occluder;
-    std::optional<Photo> source;
+    std::optional<PhotoFile> source;
     if (!o.source_image.empty()) source = read_photo(images_dir / o.source_image);
     const int dx = o.source_box[0] - o.box[0], dy = o.source_box[1] - o.box[1];
     for (int y = o.box[1]; y < o.box[3]; ++y)
       for (int x = o.box[0]; x < o.box[2]; ++x) {
         if (!p.footprint.at<uint8_t>(y, x)) continue;
-        float* px = &photo.pixels[(size_t(y) * W + x) * C];
+        float* px = &photo.image.pixels[(size_t(y) * W + x) * C];
         for (int c = 0; c < C; ++c) {
           if (source) {
-            const int sc = std::min(c, source->spec.nchannels - 1);
-            px[c] = source->pixels[(size_t(y + dy) * source->spec.width + (x + dx)) * source->spec.nchannels + sc];
+            const int sc = std::min(c, source->image.channels - 1);
+            px[c] = source->image.pixels[(size_t(y + dy) * source->image.width + (x + dx)) * source->image.channels + sc];
           } else {
             const bool alpha = c == 3 || (C == 2 && c == 1);
             const float grey = (o.color[0] + o.color[1] + o.color[2]) / (3 * 255.0f);
@@ -417,7 +394,7 @@ OccludedView write_view(const Capture& c, size_t i, const std::vector<size_t>& t
     for (size_t t : track) targets.push_back(c.names[t]);
     Random rng(view_seed(o.seed, targets[0]));
     const std::vector<Placed> placed = place_occluders(rng, s.width, s.height, o, targets, c.names, c.sizes);
-    Photo photo = read_photo(c.images / name);
+    PhotoFile photo = read_photo(c.images / name);
     mask = paint(photo, placed, c.images);
     make_dirs((out / "images" / name).parent_path());
     write_photo(out / "images" / name, photo);

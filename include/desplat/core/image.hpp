@@ -3,6 +3,7 @@
 // image files is io/image_io.hpp; training and rendering need only this type.
 #pragma once
 
+#include <string>
 #include <vector>
 
 namespace desplat {
@@ -12,5 +13,8 @@ struct FloatImage {
   int width = 0, height = 0, channels = 0;
   std::vector<float> pixels;  // [H, W, C]
 };
+
+// "WxH", the way error messages print an image size.
+inline std::string size_text(int width, int height) { return std::to_string(width) + "x" + std::to_string(height); }
 
 }  // namespace desplat

@@ -1,0 +1,56 @@
+// Photo files as stored, through OpenImageIO (see photo_file.hpp).
+#include "desplat/io/photo_file.hpp"
+
+#include <OpenImageIO/imageio.h>
+
+#include "io/image_read_helpers.hpp"
+
+namespace desplat {
+
+struct PhotoMetadata {
+  OIIO::ImageSpec spec;
+};
+
+PhotoFile read_photo_file(const std::filesystem::path& path) {
+  const OIIO::ImageSpec config = unassociated_alpha();
+  auto in = OIIO::ImageInput::open(path.string(), &config);
+  if (!in) throw ImageError(path.string() + ": cannot read the image: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  PhotoFile p;
+  p.format = in->format_name();
+  p.metadata = std::make_shared<const PhotoMetadata>(PhotoMetadata{spec});
+  p.image = FloatImage{spec.width, spec.height, spec.nchannels, {}};
+  p.image.pixels.resize(size_t(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, p.image.pixels.data()))
+    throw ImageError(path.string() + ": cannot decode the image: " + in->geterror());
+  return p;
+}
+
+std::array<int, 2> read_image_size(const std::filesystem::path& path) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) throw ImageError(path.string() + ": cannot read the image: " + OIIO::geterror());
+  return {in->spec().width, in->spec().height};
+}
+
+void write_photo_file(const std::filesystem::path& path, const PhotoFile& p) {
+  if (!p.metadata) throw ImageError(path.string() + ": cannot write the image: it was not read with read_photo_file");
+  OIIO::ImageSpec spec = p.metadata->spec;      // keeps the metadata (e.g. EXIF orientation)
+  spec.attribute("oiio:UnassociatedAlpha", 1);  // write the pixels as read
+  if (p.format == "jpeg") {
+    spec.attribute("Compression", "jpeg:95");
+    spec.attribute("jpeg:subsampling", "4:4:4");  // no chroma bleeding across edited edges
+  }
+  auto out = OIIO::ImageOutput::create(path.string());
+  if (!out || !out->open(path.string(), spec) ||
+      !out->write_image(OIIO::TypeDesc::FLOAT, p.image.pixels.data()) || !out->close())
+    throw ImageError(path.string() + ": cannot write the image: " + OIIO::geterror());
+}
+
+void write_mask_u8(const std::filesystem::path& path, int width, int height, const uint8_t* pixels) {
+  auto out = OIIO::ImageOutput::create(path.string());
+  const OIIO::ImageSpec spec(width, height, 1, OIIO::TypeDesc::UINT8);
+  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, pixels) || !out->close())
+    throw ImageError(path.string() + ": cannot write the mask: " + OIIO::geterror());
+}
+
+}  // namespace desplat
