@@ -41,14 +41,15 @@ std::map<std::string, size_t> index_by_name(const std::vector<std::string>& name
   return index;
 }
 
-// Gives every image a list file names the list's role; a name in both lists is an error.
-void apply_list(const fs::path& path, ViewRole role, const std::map<std::string, size_t>& index,
-                std::vector<std::optional<ViewRole>>& roles) {
-  const std::vector<std::string> lines = read_lines(path);
+// Gives every image a list names the list's role; a name in both lists is an error. `lines`
+// come from the file `source` (its name prefixes errors) or, when it is empty, from a caller.
+void apply_list(const std::vector<std::string>& lines, const fs::path& source, ViewRole role,
+                const std::map<std::string, size_t>& index, std::vector<std::optional<ViewRole>>& roles) {
   for (size_t n = 0; n < lines.size(); ++n) {
     const std::string name = trim(lines[n]);
     if (name.empty() || name[0] == '#') continue;
-    const std::string at = path.string() + ":" + std::to_string(n + 1) + ": ";
+    const std::string at = source.empty() ? std::string(role == ViewRole::Train ? "train" : "test") + " list: "
+                                          : source.string() + ":" + std::to_string(n + 1) + ": ";
     const auto it = index.find(name);
     if (it == index.end()) throw SplitError(at + "'" + name + "' is not a registered image of the model");
     auto& slot = roles[it->second];
@@ -68,13 +69,18 @@ std::vector<ViewRole> every_nth(const std::vector<std::string>& names, int n) {
 }
 
 std::vector<ViewRole> name_lists(const std::vector<std::string>& names, const SplitOptions& o) {
-  if (o.train_list.empty() && o.test_list.empty())
-    throw SplitError("split rule 'lists' needs a train list, a test list or both");
+  const bool has_train = !o.train_list.empty() || o.train_names.has_value();
+  const bool has_test = !o.test_list.empty() || o.test_names.has_value();
+  if (!has_train && !has_test) throw SplitError("split rule 'lists' needs a train list, a test list or both");
+  if ((!o.train_list.empty() && o.train_names) || (!o.test_list.empty() && o.test_names))
+    throw SplitError("split rule 'lists': give each list as a file or as names, not both");
   const auto index = index_by_name(names);
   std::vector<std::optional<ViewRole>> roles(names.size());
-  if (!o.train_list.empty()) apply_list(o.train_list, ViewRole::Train, index, roles);
-  if (!o.test_list.empty()) apply_list(o.test_list, ViewRole::Test, index, roles);
-  const ViewRole rest = o.train_list.empty() ? ViewRole::Train : o.test_list.empty() ? ViewRole::Test : ViewRole::Unused;
+  if (!o.train_list.empty()) apply_list(read_lines(o.train_list), o.train_list, ViewRole::Train, index, roles);
+  if (o.train_names) apply_list(*o.train_names, {}, ViewRole::Train, index, roles);
+  if (!o.test_list.empty()) apply_list(read_lines(o.test_list), o.test_list, ViewRole::Test, index, roles);
+  if (o.test_names) apply_list(*o.test_names, {}, ViewRole::Test, index, roles);
+  const ViewRole rest = !has_train ? ViewRole::Train : !has_test ? ViewRole::Test : ViewRole::Unused;
   std::vector<ViewRole> out;
   for (const auto& r : roles) out.push_back(r.value_or(rest));
   return out;
@@ -168,7 +174,9 @@ std::vector<ViewRole> phototourism(const std::vector<std::string>& names, const 
   return out;
 }
 
-const char* rule_name(SplitRule rule) {
+}  // namespace
+
+const char* split_rule_name(SplitRule rule) {
   switch (rule) {
     case SplitRule::EveryNth: return "every-nth";
     case SplitRule::AllTrain: return "all-train";
@@ -180,14 +188,17 @@ const char* rule_name(SplitRule rule) {
   return "?";
 }
 
+namespace {
+
 // Options that belong to another rule are a mistake on the caller's side, not ignored.
 void check_options(const SplitOptions& o) {
-  const std::string rule = std::string("split rule '") + rule_name(o.rule) + "'";
+  const std::string rule = std::string("split rule '") + split_rule_name(o.rule) + "'";
   if (o.rule != SplitRule::EveryNth && o.every_nth != SplitOptions{}.every_nth)
     throw SplitError(rule + " does not use every_nth (only 'every-nth' does)");
   if (o.rule == SplitRule::EveryNth && o.every_nth < 2)
     throw SplitError("every_nth must be at least 2, got " + std::to_string(o.every_nth));
-  if (o.rule != SplitRule::NameLists && (!o.train_list.empty() || !o.test_list.empty()))
+  if (o.rule != SplitRule::NameLists &&
+      (!o.train_list.empty() || !o.test_list.empty() || o.train_names || o.test_names))
     throw SplitError(rule + " does not use train/test lists (only 'lists' does)");
   if (o.rule != SplitRule::RobustNeRF && o.clutter_ratio)
     throw SplitError(rule + " does not use clutter_ratio (only 'robustnerf' does)");
@@ -203,7 +214,7 @@ void check_options(const SplitOptions& o) {
 SplitRule split_rule_from_name(const std::string& name) {
   for (SplitRule r : {SplitRule::EveryNth, SplitRule::AllTrain, SplitRule::NameLists, SplitRule::RobustNeRF,
                       SplitRule::OnTheGo, SplitRule::PhotoTourism})
-    if (name == rule_name(r)) return r;
+    if (name == split_rule_name(r)) return r;
   throw SplitError("unknown split rule '" + name +
                    "' (expected every-nth, all-train, lists, robustnerf, onthego or phototourism)");
 }
@@ -221,7 +232,7 @@ std::vector<ViewRole> assign_split(const std::vector<std::string>& names, const 
   }
   const auto train = std::count(roles.begin(), roles.end(), ViewRole::Train);
   if (train == 0)
-    throw SplitError(std::string("split rule '") + rule_name(options.rule) + "' leaves no training view among " +
+    throw SplitError(std::string("split rule '") + split_rule_name(options.rule) + "' leaves no training view among " +
                      std::to_string(names.size()) + " images");
   return roles;
 }

@@ -2,6 +2,8 @@
 // folder recorded in the model's config.json; the Gaussians come from its checkpoint.
 #include "desplat/jobs/render_run.hpp"
 
+#include "desplat/jobs/model_folder.hpp"
+
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -55,26 +57,14 @@ std::vector<size_t> choose_views(const Scene& scene, const std::string& views, c
 }  // namespace
 
 int run_render(const RenderRunOptions& o) {
-  const fs::path config_path = o.model_dir / "config.json", ckpt_path = o.model_dir / "checkpoint.ckpt";
-  std::ifstream f(config_path);
-  if (!f) throw std::invalid_argument("not a desplat model folder: cannot read " + config_path.string());
-  nlohmann::json cfg;
-  try {
-    f >> cfg;
-  } catch (const nlohmann::json::exception& e) {
-    throw std::invalid_argument(config_path.string() + " is not valid JSON: " + e.what());
-  }
   if (o.layer != "static" && o.layer != "distractor" && o.layer != "composite")
     throw std::invalid_argument("unknown layer '" + o.layer + "' (static, distractor or composite)");
-  const TrainConfig train = config_from_json(cfg.at("train"));
-  const nlohmann::json& run = cfg.at("run");
-  const std::string data_dir = run.at("data_dir").get<std::string>();
-  SceneOptions scene_options;
-  scene_options.downscale = run.at("downscale").get<int>();
-  scene_options.split.rule = SplitRule(run.at("split_rule").get<int>());
-  scene_options.split.every_nth = run.at("split_every_nth").get<int>();
-  const Scene scene = load_colmap_scene(data_dir, scene_options);
-  const Checkpoint ckpt = read_checkpoint(ckpt_path);
+  const ModelFolder model(o.model_dir);
+  const ModelFolder::Config config = model.read_config();
+  const TrainConfig& train = config.train;
+  const std::string data_dir = config.scene.data_dir.string();
+  const Scene scene = load_colmap_scene(data_dir, config.scene.reopen_options());
+  const Checkpoint ckpt = model.read_checkpoint();
   const GaussianSet statics = gaussians_from_checkpoint(ckpt);
   std::map<std::string, size_t> buffer_of;  // training view name → distractor buffer
   const std::vector<std::string> buffer_views = distractor_views_in_checkpoint(ckpt);

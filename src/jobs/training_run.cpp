@@ -1,6 +1,8 @@
 // desplat_train's job: scene → trainer → progress, evaluation, checkpoints, outputs.
 #include "desplat/jobs/training_run.hpp"
 
+#include "desplat/jobs/model_folder.hpp"
+
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -89,7 +91,7 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
 }
 
-// Distractor-mask quality against the scene's ground truth (issue 6 item 7); null without masks.
+// Distractor-mask quality against the scene's ground truth; null without masks.
 json mask_json(const MaskMetrics& m) {
   if (m.views.empty()) return nullptr;
   json per = json::array();
@@ -201,6 +203,17 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   scene_options.downscale = opt.downscale;
   scene_options.split = opt.split;
   const Scene scene = load_colmap_scene(data_dir, scene_options);
+  const ModelFolder model(opt.out_dir);
+  const SceneRecipe recipe = SceneRecipe::of(scene, data_dir, scene_options);
+  if (opt.resume) {
+    if (!model.has_checkpoint())
+      throw std::invalid_argument("--resume: no checkpoint at " + model.checkpoint_path().string());
+    // Continuing on other views or at another size would silently train another model.
+    const std::string changed = model.read_config().scene.difference(recipe);
+    if (!changed.empty())
+      throw std::invalid_argument("--resume: the scene is not the one " + opt.out_dir.string() +
+                                  " was trained on: " + changed);
+  }
   const TrainingData data = load_training_data(scene);
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
@@ -220,20 +233,14 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
                 (long long)full_resolution_from, (long long)config.iterations);
 
-  const json run_json = {{"data_dir", fs::absolute(data_dir).string()},
-                         {"downscale", opt.downscale},
-                         {"split_every_nth", opt.split.every_nth},
-                         {"split_rule", int(opt.split.rule)},
-                         {"static_only", opt.static_only}};
-  write_file_atomically(opt.out_dir / "config.json", json{{"train", config_to_json(config)}, {"run", run_json}}.dump(2));
+  const json run_json = {{"static_only", opt.static_only}};
+  model.write_config({config, recipe, run_json});
 
   Trainer trainer(data, config);
-  const fs::path ckpt_path = opt.out_dir / "checkpoint.ckpt";
-  auto save = [&] { write_checkpoint(ckpt_path, make_training_checkpoint(trainer, {{"run", run_json}})); };
+  const fs::path ckpt_path = model.checkpoint_path();
+  auto save = [&] { model.write_checkpoint(trainer, {{"run", run_json}}); };
   if (opt.resume) {
-    if (!fs::exists(ckpt_path))
-      throw std::invalid_argument("--resume: no checkpoint at " + ckpt_path.string());
-    restore_training_checkpoint(trainer, read_checkpoint(ckpt_path));
+    restore_training_checkpoint(trainer, model.read_checkpoint());
     std::printf("resumed from %s at step %lld\n", ckpt_path.c_str(), (long long)trainer.current_step());
   }
 
@@ -311,7 +318,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"total", median(t_total)},
                                                      {"distractor_share", median(dist_share)},
                                                      {"steps_measured", t_fwd.size()}};
-  write_file_atomically(opt.out_dir / "metrics.json", metrics.dump(2));
+  model.write_metrics(metrics);
   std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
               (long long)trainer.current_step(), format_duration(wall).c_str(), trainer.gaussians().size(),
               trainer.distractor_count(), metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());

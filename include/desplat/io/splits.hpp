@@ -13,9 +13,10 @@
 //                 feature extractor does).
 //   AllTrain      everything Train, no test views.
 //   NameLists     files with one image name per line (blank lines and lines starting with '#'
-//                 are skipped, surrounding whitespace trimmed). Both lists: listed names get
-//                 that role, the rest are Unused. Only test_list: the rest are Train. Only
-//                 train_list: the rest are Test.
+//                 are skipped, surrounding whitespace trimmed), or the same lists given as
+//                 names (train_names / test_names: how a trained model reopens its exact
+//                 views). Both lists: listed names get that role, the rest are Unused. Only a
+//                 test list: the rest are Train. Only a train list: the rest are Test.
 //   RobustNeRF    the file name contains exactly one of "clutter", "extra", "clean" (RobustNeRF
 //                 names its files e.g. "1extra000.JPG", "2clutter008.JPG"). extra → Test
 //                 always. Without clutter_ratio: clutter → Train, clean → Unused. With
@@ -60,6 +61,8 @@ struct SplitOptions {
   int every_nth = 8;                    // EveryNth only (other rules need the default)
   std::filesystem::path train_list;     // NameLists only
   std::filesystem::path test_list;      // NameLists only
+  // NameLists only: a list given as its names instead of a file (present, even if empty, = given).
+  std::optional<std::vector<std::string>> train_names, test_names;
   std::optional<double> clutter_ratio;  // RobustNeRF only
   std::filesystem::path tsv;            // PhotoTourism only
 };
@@ -67,6 +70,8 @@ struct SplitOptions {
 // Parses a rule name as used on command lines: "every-nth", "all-train", "lists",
 // "robustnerf", "onthego", "phototourism". Throws SplitError listing the names.
 SplitRule split_rule_from_name(const std::string& name);
+// The command-line name of a rule (the inverse of split_rule_from_name).
+const char* split_rule_name(SplitRule rule);
 
 // The role of each name, in the order given. Names must be unique (COLMAP's are).
 std::vector<ViewRole> assign_split(const std::vector<std::string>& names, const SplitOptions& options);
