@@ -98,11 +98,17 @@ int main(int argc, char** argv) {
   app.add_flag("--overwrite", o.overwrite, "Replace database.db and sparse/ left in --out by an earlier run");
   app.add_option("--colmap", o.colmap, "The colmap executable: a name looked up on PATH, or a path")
       ->default_str("colmap");
+  double stage_time_limit = 0;
+  app.add_option("--stage-time-limit", stage_time_limit,
+                 "Seconds each colmap stage may run before it is stopped (default: about ten times what it "
+                 "needs on 2 cores for this many photos)")
+      ->check(CLI::PositiveNumber);
   app.add_flag("--quiet,-q", quiet, "No progress lines (errors and the summary are still printed)");
   CLI11_PARSE(app, argc, argv);
 
   o.matcher = *sfm::matcher_from_name(matcher);
   if (min_registered > 0) o.min_registered = min_registered;
+  if (stage_time_limit > 0) o.stage_time_limit_s = stage_time_limit;
   const bool tty = ::isatty(STDOUT_FILENO) != 0;
   if (!quiet) o.on_progress = sfm::terminal_progress(stdout, tty);
   const char* newline = tty && !quiet ? "\n" : "";  // end a progress line left mid-way

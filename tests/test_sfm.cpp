@@ -1,5 +1,5 @@
 // Structure from motion (desplat/sfm.hpp): one real colmap run on 7 fox photos checked
-// against the independent reference model in /work/shared/data/fox/sparse/0 (made by colmap
+// against the independent reference model in the fox capture's sparse/0 (made by colmap
 // from all 50 photos at twice the resolution), and every failure path driven by a fake
 // `colmap` shell script placed first on PATH.
 #include <gtest/gtest.h>
@@ -18,70 +18,23 @@
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/sfm/sfm.hpp"
+#include "support/expect.hpp"
+#include "support/fox_scene.hpp"
+#include "support/scoped_env.hpp"
+#include "support/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 namespace sfm = desplat::sfm;
 namespace colmap = desplat::colmap;
 using sfm::SfmErrorKind;
+using desplat::testing::ScopedEnv;
+using desplat::testing::slurp;
+using desplat::testing::spit;
+using desplat::testing::TempDir;
 
 namespace {
 
-const fs::path kFox = "/work/shared/data/fox";
-
-class TempDir {
- public:
-  TempDir() {
-    std::string templ = (fs::temp_directory_path() / "desplat_sfm_XXXXXX").string();
-    path_ = ::mkdtemp(templ.data());
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  ~TempDir() {
-    std::error_code ec;
-    fs::permissions(path_, fs::perms::owner_all, fs::perm_options::add, ec);
-    for (const auto& e : fs::recursive_directory_iterator(path_, ec))  // undo read-only inputs
-      if (e.is_directory(ec) && !e.is_symlink(ec))
-        fs::permissions(e.path(), fs::perms::owner_all, fs::perm_options::add, ec);
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
-// Sets an environment variable for one scope.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old;
-    ::setenv(name, value.c_str(), 1);
-  }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-  ~ScopedEnv() {
-    if (old_)
-      ::setenv(name_, old_->c_str(), 1);
-    else
-      ::unsetenv(name_);
-  }
-
- private:
-  const char* name_;
-  std::optional<std::string> old_;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void spit(const fs::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary);
-  out << text;
-}
+const fs::path kFox = desplat::testing::fox_dir();
 
 // Runs `o` and returns the SfmError it must throw.
 sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
@@ -95,8 +48,6 @@ sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
   return sfm::SfmError(SfmErrorKind::BadOptions, "");
 }
 
-#define EXPECT_CONTAINS(haystack, needle) \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "in: " << (haystack)
 
 // ---- A fake colmap -----------------------------------------------------------------------
 
@@ -104,6 +55,7 @@ sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
 //   FAKE_COLMAP_ARGS file   append each command line to it
 //   FAKE_COLMAP_FAIL stage  that stage prints an error and exits 3
 //   FAKE_COLMAP_KILL stage  that stage kills itself with SIGKILL
+//   FAKE_COLMAP_HANG stage  that stage sleeps for a minute
 //   FAKE_COLMAP_MODELS dir  mapper copies dir/* into --output_path; otherwise mapper prints
 //                           colmap's "failed to create sparse model" and exits
 //                           $FAKE_COLMAP_NO_MODEL_EXIT (default 1, as colmap 3.8 does)
@@ -123,6 +75,7 @@ case "$stage" in
 esac
 if [ "$stage" = "$FAKE_COLMAP_FAIL" ]; then echo "fake colmap: disk on fire" >&2; exit 3; fi
 if [ "$stage" = "$FAKE_COLMAP_KILL" ]; then kill -9 $$; fi
+if [ "$stage" = "$FAKE_COLMAP_HANG" ]; then exec sleep 60; fi
 if [ "$stage" = mapper ]; then
   if [ -n "$FAKE_COLMAP_MODELS" ]; then cp -R "$FAKE_COLMAP_MODELS"/. "$out"/; exit 0; fi
   echo "ERROR: failed to create sparse model" >&2
@@ -429,6 +382,18 @@ TEST_F(FakeColmap, ReportsColmapKilledBySignal) {
   EXPECT_CONTAINS(e.what(), "colmap mapper was killed by signal 9");
 }
 
+TEST_F(FakeColmap, StageRunningPastItsTimeLimitIsStopped) {
+  ScopedEnv hang("FAKE_COLMAP_HANG", "exhaustive_matcher");
+  options_.stage_time_limit_s = 0.5;
+  const auto e = expect_error(options_, SfmErrorKind::TimedOut);
+  EXPECT_CONTAINS(e.what(), "colmap exhaustive_matcher ran past its time limit of 0.5 s for 6 photos");
+  EXPECT_CONTAINS(e.what(), "Matching block [1/1, 1/1]");  // its last lines
+  EXPECT_CONTAINS(e.what(), "--stage-time-limit");
+  options_.stage_time_limit_s = -1;
+  options_.overwrite = true;
+  expect_error(options_, SfmErrorKind::BadOptions);
+}
+
 TEST_F(FakeColmap, ReportsNoModel) {
   for (const char* exit_code : {"1", "0"}) {  // colmap 3.8 exits 1; a 0 without files is no better
     ScopedEnv code("FAKE_COLMAP_NO_MODEL_EXIT", exit_code);
@@ -553,55 +518,6 @@ TEST_F(FakeColmap, SequentialAndSpatialMatchersAreRun) {
     expect_error(options_, SfmErrorKind::StageFailed);
     EXPECT_CONTAINS(slurp(args_log_), std::string(sfm::matcher_name(m)) + "_matcher --database_path");
   }
-}
-
-// ---- Pure helpers ------------------------------------------------------------------------
-
-TEST(SfmHelpers, MatcherChoiceAndDefaults) {
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 100), sfm::Matcher::Exhaustive);
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 101), sfm::Matcher::Sequential);
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Spatial, 5), sfm::Matcher::Spatial);
-  EXPECT_EQ(sfm::matcher_from_name("sequential"), sfm::Matcher::Sequential);
-  EXPECT_EQ(sfm::matcher_from_name("Sequential"), std::nullopt);
-  EXPECT_EQ(sfm::default_min_registered(1), 3);
-  EXPECT_EQ(sfm::default_min_registered(6), 3);
-  EXPECT_EQ(sfm::default_min_registered(7), 4);
-  EXPECT_EQ(sfm::default_min_registered(50), 25);
-}
-
-TEST(SfmHelpers, FindExecutable) {
-  TempDir tmp;
-  spit(tmp.path() / "tool", "#!/bin/sh\n");
-  spit(tmp.path() / "data", "x");
-  fs::permissions(tmp.path() / "tool", fs::perms::owner_all);
-  ScopedEnv path("PATH", "/nonexistent:" + tmp.path().string());
-  EXPECT_EQ(sfm::find_executable("tool"), tmp.path() / "tool");
-  EXPECT_EQ(sfm::find_executable("data"), std::nullopt);  // not executable
-  EXPECT_EQ(sfm::find_executable((tmp.path() / "tool").string()), tmp.path() / "tool");
-  EXPECT_EQ(sfm::find_executable("missing"), std::nullopt);
-}
-
-TEST(SfmHelpers, TerminalProgressPrintsPlainLinesWhenNotATty) {
-  std::FILE* f = std::tmpfile();
-  ASSERT_NE(f, nullptr);
-  const auto show = sfm::terminal_progress(f, false, 1000.0);
-  sfm::SfmProgress p;
-  p.total = 50;
-  p.unit = "image";
-  show(p);  // first of a stage: printed
-  p.done = 12;
-  show(p);  // within the interval: dropped
-  p.done = 50, p.finished = true;
-  show(p);  // a stage's last report: printed
-  sfm::SfmProgress m{sfm::SfmStage::Map, 31, 50, 2, "image", false};
-  show(m);
-  std::rewind(f);
-  char buf[512] = {};
-  const size_t n = std::fread(buf, 1, sizeof buf - 1, f);
-  std::fclose(f);
-  EXPECT_EQ(std::string(buf, n),
-            "extracting features: image 0/50\nextracting features: image 50/50, done\n"
-            "mapping: model 2, registered 31/50 photos\n");
 }
 
 }  // namespace

@@ -20,7 +20,10 @@
 #include <sstream>
 #include <string_view>
 
+#include "desplat/core/stopwatch.hpp"
 #include "desplat/io/colmap.hpp"
+#include "desplat/sfm/subprocess.hpp"
+#include "sfm/progress.hpp"
 
 extern char** environ;
 
@@ -29,15 +32,16 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 [[noreturn]] void fail(SfmErrorKind kind, const std::string& message) { throw SfmError(kind, message); }
 
 std::string in_quotes(const fs::path& p) { return "'" + p.string() + "'"; }
+
+std::string seconds_text(double s) {  // "0.5", "3675"
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", s);
+  return buf;
+}
 
 // ---- Photos ------------------------------------------------------------------------------
 
@@ -227,231 +231,6 @@ void prepare_output(const SfmOptions& o, const Layout& l, const std::vector<fs::
   write_image_list(l.image_list, photos);
 }
 
-// ---- Child process -----------------------------------------------------------------------
-
-struct ChildExit {
-  bool signaled = false;
-  int code = 0;  // exit status, or the signal number
-  bool ok() const { return !signaled && code == 0; }
-};
-
-// Kills and reaps the child if we leave early (an exception while reading its output).
-class ChildGuard {
- public:
-  explicit ChildGuard(pid_t pid) : pid_(pid) {}
-  ChildGuard(const ChildGuard&) = delete;
-  ChildGuard& operator=(const ChildGuard&) = delete;
-  ~ChildGuard() {
-    if (pid_ <= 0) return;
-    ::kill(pid_, SIGTERM);
-    int status = 0;
-    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-    }
-  }
-  ChildExit wait() {
-    int status = 0;
-    pid_t r;
-    while ((r = ::waitpid(pid_, &status, 0)) < 0 && errno == EINTR) {
-    }
-    pid_ = -1;
-    if (r < 0) return {true, 0};
-    if (WIFSIGNALED(status)) return {true, WTERMSIG(status)};
-    return {false, WEXITSTATUS(status)};
-  }
-
- private:
-  pid_t pid_;
-};
-
-class Fd {
- public:
-  explicit Fd(int fd = -1) : fd_(fd) {}
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  ~Fd() { reset(); }
-  int get() const { return fd_; }
-  void reset() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
-
- private:
-  int fd_;
-};
-
-class SpawnActions {
- public:
-  SpawnActions() { posix_spawn_file_actions_init(&fa_); }
-  SpawnActions(const SpawnActions&) = delete;
-  SpawnActions& operator=(const SpawnActions&) = delete;
-  ~SpawnActions() { posix_spawn_file_actions_destroy(&fa_); }
-  posix_spawn_file_actions_t* get() { return &fa_; }
-
- private:
-  posix_spawn_file_actions_t fa_;
-};
-
-class SpawnAttr {
- public:
-  // Default signal dispositions and an empty mask, whatever the caller ignores or blocks
-  // (an ignored SIGPIPE or SIGINT would otherwise be inherited by colmap).
-  SpawnAttr() {
-    posix_spawnattr_init(&attr_);
-    sigset_t none, defaults;
-    sigemptyset(&none);
-    sigemptyset(&defaults);
-    for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaddset(&defaults, sig);
-    posix_spawnattr_setsigmask(&attr_, &none);
-    posix_spawnattr_setsigdefault(&attr_, &defaults);
-    posix_spawnattr_setflags(&attr_, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-  }
-  SpawnAttr(const SpawnAttr&) = delete;
-  SpawnAttr& operator=(const SpawnAttr&) = delete;
-  ~SpawnAttr() { posix_spawnattr_destroy(&attr_); }
-  const posix_spawnattr_t* get() const { return &attr_; }
-
- private:
-  posix_spawnattr_t attr_;
-};
-
-// Runs argv[0] (an absolute path; no shell, so paths need no quoting) with stdin from
-// /dev/null and stdout+stderr into one pipe, handing each chunk of output to on_output.
-ChildExit run_process(const std::vector<std::string>& argv, const std::function<void(std::string_view)>& on_output) {
-  int fds[2];
-  if (::pipe2(fds, O_CLOEXEC) != 0)
-    fail(SfmErrorKind::StageFailed, std::string("cannot create a pipe: ") + std::strerror(errno));
-  Fd read_end(fds[0]), write_end(fds[1]);
-  SpawnActions actions;
-  posix_spawn_file_actions_addopen(actions.get(), 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_adddup2(actions.get(), write_end.get(), 1);
-  posix_spawn_file_actions_adddup2(actions.get(), write_end.get(), 2);
-  std::vector<char*> cargv;
-  for (const std::string& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
-  cargv.push_back(nullptr);
-  pid_t pid = 0;
-  const SpawnAttr attr;
-  const int err = ::posix_spawn(&pid, cargv[0], actions.get(), attr.get(), cargv.data(), environ);
-  if (err != 0) fail(SfmErrorKind::StageFailed, "cannot start " + in_quotes(argv[0]) + ": " + std::strerror(err));
-  ChildGuard child(pid);
-  write_end.reset();  // EOF arrives once the child (and anything it started) closes the pipe
-  char buf[1 << 16];
-  for (;;) {
-    const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    on_output(std::string_view(buf, static_cast<size_t>(n)));
-  }
-  return child.wait();
-}
-
-// ---- Progress parsing --------------------------------------------------------------------
-
-// "12/50" at the start of s.
-bool parse_fraction(std::string_view s, int& a, int& b) {
-  const char* end = s.data() + s.size();
-  auto r1 = std::from_chars(s.data(), end, a);
-  if (r1.ec != std::errc() || r1.ptr == end || *r1.ptr != '/') return false;
-  auto r2 = std::from_chars(r1.ptr + 1, end, b);
-  return r2.ec == std::errc();
-}
-
-// Rest of `line` after `prefix`, or nullopt.
-std::optional<std::string_view> after(std::string_view line, std::string_view prefix) {
-  const size_t at = line.find(prefix);
-  if (at == std::string_view::npos) return std::nullopt;
-  return line.substr(at + prefix.size());
-}
-
-// Turns colmap's output lines into progress reports.
-class ProgressParser {
- public:
-  ProgressParser(SfmStage stage, int total, const char* unit) {
-    p_.stage = stage;
-    p_.total = total;
-    p_.unit = unit;
-  }
-  const SfmProgress& current() const { return p_; }
-
-  // True when the line changed the progress.
-  bool feed(std::string_view line) {
-    switch (p_.stage) {
-      case SfmStage::Extract: return feed_fraction(line, "Processed file [", "image");
-      case SfmStage::Match: return feed_match(line);
-      case SfmStage::Map: return feed_map(line);
-    }
-    return false;
-  }
-
- private:
-  bool feed_fraction(std::string_view line, std::string_view prefix, const char* unit) {
-    const auto rest = after(line, prefix);
-    int a = 0, b = 0;
-    if (!rest || !parse_fraction(*rest, a, b)) return false;
-    p_.done = a, p_.total = b, p_.unit = unit;
-    return true;
-  }
-  // Exhaustive: "Matching block [i/n, j/n]" (n² blocks); sequential, spatial: "Matching image [i/n]".
-  bool feed_match(std::string_view line) {
-    if (feed_fraction(line, "Matching image [", "image")) return true;
-    const auto rest = after(line, "Matching block [");
-    int i = 0, n = 0, j = 0, m = 0;
-    if (!rest || !parse_fraction(*rest, i, n)) return false;
-    const auto second = after(*rest, ", ");
-    if (!second || !parse_fraction(*second, j, m)) return false;
-    p_.done = (i - 1) * m + j, p_.total = n * m, p_.unit = "block";
-    return true;
-  }
-  bool feed_map(std::string_view line) {
-    if (after(line, "Initializing with image pair #")) {
-      if (started_) ++p_.model;
-      started_ = true;
-      p_.done = 2;
-      return true;
-    }
-    if (const auto rest = after(line, "Registering image #")) {  // "#6 (3)": 3 once registered
-      const auto open = rest->find('(');
-      int n = 0;
-      if (open == std::string_view::npos) return false;
-      const std::string_view num = rest->substr(open + 1);
-      if (std::from_chars(num.data(), num.data() + num.size(), n).ec != std::errc()) return false;
-      p_.done = n;
-      return true;
-    }
-    if (after(line, "=> Could not register")) {
-      p_.done = std::max(0, p_.done - 1);
-      return true;
-    }
-    return false;
-  }
-
-  SfmProgress p_;
-  bool started_ = false;
-};
-
-// Splits a byte stream into lines at '\n' or '\r'.
-class LineSplitter {
- public:
-  template <class F>
-  void feed(std::string_view chunk, F&& on_line) {
-    for (char c : chunk) {
-      if (c == '\n' || c == '\r') {
-        on_line(std::string_view(line_));
-        line_.clear();
-      } else if (line_.size() < 4096) {  // a runaway line cannot grow without bound
-        line_ += c;
-      }
-    }
-  }
-  template <class F>
-  void finish(F&& on_line) {
-    if (!line_.empty()) on_line(std::string_view(line_));
-    line_.clear();
-  }
-
- private:
-  std::string line_;
-};
-
 // ---- Stages ------------------------------------------------------------------------------
 
 struct Context {
@@ -460,6 +239,12 @@ struct Context {
   std::ofstream log;
   ProgressFn on_progress;
   int num_photos = 0;
+  Matcher matcher = Matcher::Exhaustive;  // as resolved
+  std::optional<double> fixed_time_limit;  // SfmOptions::stage_time_limit_s
+
+  double time_limit(SfmStage stage) const {
+    return fixed_time_limit ? *fixed_time_limit : default_stage_time_limit(stage, matcher, num_photos);
+  }
 };
 
 void report(const Context& c, const SfmProgress& p) {
@@ -467,8 +252,9 @@ void report(const Context& c, const SfmProgress& p) {
 }
 
 struct StageOutput {
-  ChildExit exit;
+  ProcessExit exit;
   double seconds = 0;
+  double time_limit = 0;  // s
   std::deque<std::string> tail;  // last non-blank lines
   SfmProgress last;
 };
@@ -494,16 +280,24 @@ StageOutput run_stage(Context& c, SfmStage stage, const std::string& command, st
     if (parser.feed(line)) report(c, parser.current());
   };
   LineSplitter lines;
-  const auto t0 = Clock::now();
-  out.exit = run_process(args, [&](std::string_view chunk) {
-    c.log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    c.log.flush();  // so `tail -f colmap.log` follows along
-    lines.feed(chunk, on_line);
-  });
+  const Stopwatch clock;
+  out.time_limit = c.time_limit(stage);
+  try {
+    out.exit = run_subprocess(args, [&](std::string_view chunk) {
+      c.log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+      c.log.flush();  // so `tail -f colmap.log` follows along
+      lines.feed(chunk, on_line);
+    }, out.time_limit);
+  } catch (const SubprocessError& e) {
+    fail(SfmErrorKind::StageFailed, e.what());
+  }
   lines.finish(on_line);
-  out.seconds = seconds_since(t0);
-  c.log << "\n######## colmap " << command << " " << (out.exit.signaled ? "killed by signal " : "exited with code ")
-        << out.exit.code << " after " << out.seconds << " s\n"
+  out.seconds = clock.seconds();
+  c.log << "\n######## colmap " << command << " "
+        << (out.exit.how == ProcessExit::How::TimedOut   ? "stopped at its time limit"
+            : out.exit.how == ProcessExit::How::Signaled ? "killed by signal " + std::to_string(out.exit.code)
+                                                         : "exited with code " + std::to_string(out.exit.code))
+        << " after " << out.seconds << " s\n"
         << std::flush;
   out.last = parser.current();
   return out;
@@ -518,7 +312,15 @@ std::string tail_text(const StageOutput& s) {
 
 [[noreturn]] void stage_failed(const Context& c, const std::string& command, const StageOutput& s) {
   std::string what;
-  if (s.exit.signaled) {
+  if (s.exit.how == ProcessExit::How::TimedOut) {
+    fail(SfmErrorKind::TimedOut,
+         "colmap " + command + " ran past its time limit of " + seconds_text(s.time_limit) + " s for " +
+             std::to_string(c.num_photos) + " photos and was stopped. Its last lines:\n" + tail_text(s) +
+             "The full output is in " + in_quotes(c.layout.log) +
+             ". Try fewer or smaller photos, --matcher sequential for a video-like capture, or a longer "
+             "limit with --stage-time-limit SECONDS.");
+  }
+  if (s.exit.how == ProcessExit::How::Signaled) {
     what = "was killed by signal " + std::to_string(s.exit.code) + " (" + strsignal(s.exit.code) + ")";
     if (s.exit.code == SIGKILL) what += "; if the machine ran out of memory, try fewer --threads or smaller photos";
   } else {
@@ -694,82 +496,31 @@ Matcher choose_matcher(Matcher requested, int num_images) {
 
 int default_min_registered(int num_images) { return std::max(3, (num_images + 1) / 2); }
 
-std::string describe(const SfmProgress& p) {
-  std::ostringstream s;
-  const auto count = [&](int done, int total) {
-    s << done;
-    if (total > 0) s << "/" << total;
-  };
-  switch (p.stage) {
-    case SfmStage::Extract: s << "extracting features: image "; count(p.done, p.total); break;
-    case SfmStage::Match: s << "matching: " << p.unit << " "; count(p.done, p.total); break;
-    case SfmStage::Map:
-      s << "mapping: ";
-      if (p.model > 1) s << "model " << p.model << ", ";
-      s << "registered ";
-      count(p.done, p.total);
-      s << " photos";
-      break;
+double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos) {
+  const double n = std::max(1, num_photos);
+  switch (stage) {
+    case SfmStage::Extract: return 300 + 30 * n;
+    case SfmStage::Match: return matcher == Matcher::Exhaustive ? 600 + 3 * n * (n - 1) / 2 : 600 + 60 * n;
+    case SfmStage::Map: return 600 + 60 * n;
   }
-  if (p.finished) s << ", done";
-  return s.str();
-}
-
-ProgressFn terminal_progress(std::FILE* out, bool is_tty, double plain_interval_s) {
-  struct State {
-    bool any = false;
-    SfmStage stage = SfmStage::Extract;
-    Clock::time_point last;
-  };
-  auto state = std::make_shared<State>();
-  return [out, is_tty, plain_interval_s, state](const SfmProgress& p) {
-    const bool new_stage = !state->any || p.stage != state->stage;
-    const double interval = is_tty ? 0.1 : plain_interval_s;
-    if (!new_stage && !p.finished && seconds_since(state->last) < interval) return;
-    state->any = true, state->stage = p.stage, state->last = Clock::now();
-    if (is_tty)
-      std::fprintf(out, "\r\033[K%s%s", describe(p).c_str(), p.finished ? "\n" : "");
-    else
-      std::fprintf(out, "%s\n", describe(p).c_str());
-    std::fflush(out);
-  };
+  return 0;
 }
 
 std::vector<fs::path> find_photos(const fs::path& dir) { return scan_photos(dir).photos; }
 
-std::optional<fs::path> find_executable(const std::string& name) {
-  if (name.empty()) return std::nullopt;
-  const auto usable = [](const fs::path& p) {
-    std::error_code ec;
-    return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
-  };
-  if (name.find('/') != std::string::npos) {
-    if (usable(name)) return fs::absolute(name);
-    return std::nullopt;
-  }
-  const char* path_env = std::getenv("PATH");
-  std::string_view rest = path_env ? path_env : "";
-  while (path_env) {
-    const size_t colon = rest.find(':');
-    const std::string_view dir = rest.substr(0, colon);
-    const fs::path candidate = fs::path(dir.empty() ? "." : std::string(dir)) / name;  // POSIX: empty = cwd
-    if (usable(candidate)) return fs::absolute(candidate);
-    if (colon == std::string_view::npos) break;
-    rest.remove_prefix(colon + 1);
-  }
-  return std::nullopt;
-}
-
 SfmResult run_sfm(const SfmOptions& o) {
-  const auto t0 = Clock::now();
+  const Stopwatch clock;
   check_camera_model(o.camera_model);
+  if (o.stage_time_limit_s && !(*o.stage_time_limit_s > 0))
+    fail(SfmErrorKind::BadOptions, "the stage time limit must be positive, got " + std::to_string(*o.stage_time_limit_s) + " s");
   const fs::path colmap_exe = require_colmap(o.colmap);
   const PhotoScan scan = scan_photos(o.images);
   check_photos_found(scan, o.images);
   const int num_photos = static_cast<int>(scan.photos.size());
   const int min_registered = resolve_min_registered(o, num_photos);
 
-  Context c{colmap_exe, Layout(o.out), {}, o.on_progress, num_photos};
+  const Matcher matcher = choose_matcher(o.matcher, num_photos);
+  Context c{colmap_exe, Layout(o.out), {}, o.on_progress, num_photos, matcher, o.stage_time_limit_s};
   prepare_output(o, c.layout, scan.photos);
   c.log.open(c.layout.log, std::ios::binary | std::ios::trunc);
   if (!c.log) fail(SfmErrorKind::OutputExists, "cannot write the log file " + in_quotes(c.layout.log));
@@ -777,7 +528,6 @@ SfmResult run_sfm(const SfmOptions& o) {
   const StageOutput extract =
       run_stage(c, SfmStage::Extract, "feature_extractor", extract_args(o, c.layout), num_photos);
   finish_stage(c, "feature_extractor", extract);
-  const Matcher matcher = choose_matcher(o.matcher, num_photos);
   const StageOutput match = run_matching(c, o, matcher);
   finish_stage(c, std::string(matcher_name(matcher)) + "_matcher", match);
 
@@ -786,7 +536,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   const StageOutput map = run_stage(c, SfmStage::Map, "mapper", map_args(o, c.layout, min_registered), num_photos);
   std::vector<ModelInfo> models = collect_models(c.layout.sparse_root);
   const bool have_model = !models.empty() && models[0].registered > 0;
-  if (!map.exit.signaled && !models.empty() && models[0].registered < 0)
+  if (map.exit.how == ProcessExit::How::Exited && !models.empty() && models[0].registered < 0)
     fail(SfmErrorKind::NoModel, "colmap mapper wrote a model that cannot be read: " + models[0].error +
                                     ". The full output is in " + in_quotes(c.layout.log));
   if (!have_model && (map.exit.ok() || said_no_model(map))) no_model(c, matcher, map);
@@ -808,7 +558,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   r.num_registered = models[0].registered;
   r.num_points = models[0].points;
   r.num_models = static_cast<int>(models.size());
-  r.seconds = seconds_since(t0);
+  r.seconds = clock.seconds();
   r.extract_seconds = extract.seconds, r.match_seconds = match.seconds, r.map_seconds = map.seconds;
   return r;
 }

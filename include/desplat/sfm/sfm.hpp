@@ -30,6 +30,8 @@
 #include <string>
 #include <vector>
 
+#include "desplat/sfm/subprocess.hpp"
+
 namespace desplat::sfm {
 
 enum class SfmErrorKind {
@@ -37,7 +39,8 @@ enum class SfmErrorKind {
   ColmapMissing,     // the executable is not on PATH (or not executable)
   BadImages,         // images folder missing, empty, or without readable images; too few photos
   OutputExists,      // earlier results in `out` and overwrite is off, or `out` unusable
-  StageFailed,       // a colmap stage exited non-zero or was killed by a signal
+  StageFailed,       // a colmap stage could not start, exited non-zero or was killed by a signal
+  TimedOut,          // a colmap stage ran past its time limit and was stopped
   NoModel,           // the mapper produced no model
   TooFewRegistered,  // the best model holds fewer than min_registered photos (it is kept)
 };
@@ -69,6 +72,12 @@ Matcher choose_matcher(Matcher requested, int num_images);
 int default_min_registered(int num_images);
 
 enum class SfmStage { Extract, Match, Map };
+
+// Seconds a stage may take before it is taken for hung: about ten times what the stages took
+// on 2 cores (exhaustive matching of the 50 fox photos: 0.26 s per image pair), plus a fixed
+// margin for start-up. Extract 300 + 30·n; exhaustive matching 600 + 3·n(n−1)/2, other
+// matchers 600 + 60·n; mapping 600 + 60·n (n photos).
+double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos);
 
 // One progress report. `done`/`total` count images (extraction), blocks or images (matching,
 // see `unit`), or registered photos of the model being built (mapping; total = all photos).
@@ -102,6 +111,9 @@ struct SfmOptions {
   bool copy_images = false;             // copy the photos into <out>/images instead of a symlink
   bool overwrite = false;               // replace database.db, sparse/ and the log of an earlier run
   std::string colmap = "colmap";        // executable: a name looked up on PATH, or a path
+  // Seconds each colmap stage may run before it is stopped (SfmErrorKind::TimedOut); must be
+  // > 0. nullopt: default_stage_time_limit for the stage and the number of photos.
+  std::optional<double> stage_time_limit_s;
   ProgressFn on_progress;               // may be empty
 };
 
@@ -127,7 +139,6 @@ SfmResult run_sfm(const SfmOptions& options);
 // SfmError(BadImages) when `dir` is missing or not a folder (an empty result is not an error).
 std::vector<std::filesystem::path> find_photos(const std::filesystem::path& dir);
 
-// Absolute path of `name` (searched on PATH unless it contains '/'), if it is an executable file.
-std::optional<std::filesystem::path> find_executable(const std::string& name);
+using desplat::find_executable;  // subprocess.hpp
 
 }  // namespace desplat::sfm

@@ -1,0 +1,57 @@
+// The SfM layer's pure helpers: matcher choice, defaults and the progress lines people see.
+// Expectations are the documented rules (include/desplat/sfm/sfm.hpp), worked out by hand.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <string>
+
+#include "desplat/sfm/sfm.hpp"
+
+namespace sfm = desplat::sfm;
+
+namespace {
+
+TEST(SfmHelpers, MatcherChoiceAndDefaults) {
+  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 100), sfm::Matcher::Exhaustive);
+  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 101), sfm::Matcher::Sequential);
+  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Spatial, 5), sfm::Matcher::Spatial);
+  EXPECT_EQ(sfm::matcher_from_name("sequential"), sfm::Matcher::Sequential);
+  EXPECT_EQ(sfm::matcher_from_name("Sequential"), std::nullopt);
+  EXPECT_EQ(sfm::default_min_registered(1), 3);
+  EXPECT_EQ(sfm::default_min_registered(6), 3);
+  EXPECT_EQ(sfm::default_min_registered(7), 4);
+  EXPECT_EQ(sfm::default_min_registered(50), 25);
+}
+
+TEST(SfmHelpers, TerminalProgressPrintsPlainLinesWhenNotATty) {
+  std::FILE* f = std::tmpfile();
+  ASSERT_NE(f, nullptr);
+  const auto show = sfm::terminal_progress(f, false, 1000.0);
+  sfm::SfmProgress p;
+  p.total = 50;
+  p.unit = "image";
+  show(p);  // first of a stage: printed
+  p.done = 12;
+  show(p);  // within the interval: dropped
+  p.done = 50, p.finished = true;
+  show(p);  // a stage's last report: printed
+  sfm::SfmProgress m{sfm::SfmStage::Map, 31, 50, 2, "image", false};
+  show(m);
+  std::rewind(f);
+  char buf[512] = {};
+  const size_t n = std::fread(buf, 1, sizeof buf - 1, f);
+  std::fclose(f);
+  EXPECT_EQ(std::string(buf, n),
+            "extracting features: image 0/50\nextracting features: image 50/50, done\n"
+            "mapping: model 2, registered 31/50 photos\n");
+}
+
+TEST(SfmHelpers, StageTimeLimitsFollowTheDocumentedRule) {
+  using sfm::SfmStage, sfm::Matcher;
+  EXPECT_EQ(sfm::default_stage_time_limit(SfmStage::Extract, Matcher::Exhaustive, 50), 300 + 30 * 50);
+  EXPECT_EQ(sfm::default_stage_time_limit(SfmStage::Match, Matcher::Exhaustive, 50), 600 + 3 * 1225);
+  EXPECT_EQ(sfm::default_stage_time_limit(SfmStage::Match, Matcher::Sequential, 50), 600 + 60 * 50);
+  EXPECT_EQ(sfm::default_stage_time_limit(SfmStage::Map, Matcher::Sequential, 50), 600 + 60 * 50);
+}
+
+}  // namespace
