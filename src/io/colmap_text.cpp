@@ -12,6 +12,7 @@
 // COLMAP's own reader, which parses through long double and so rounds twice (a shortest
 // decimal near the midpoint of two doubles, e.g. 2.535696468129226, comes back 1 ulp off).
 #include "desplat/io/colmap.hpp"
+#include "io/colmap_files.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -53,7 +54,7 @@ const char* integer_kind() {
 // A whole text file split into lines; failures name the file and the 1-based line number.
 class TextFile {
  public:
-  explicit TextFile(fs::path path) : path_(std::move(path)), data_(detail::read_file(path_)) {
+  explicit TextFile(fs::path path) : path_(std::move(path)), data_(read_file(path_)) {
     std::string_view rest = data_;
     while (!rest.empty()) {
       const size_t eol = rest.find('\n');
@@ -402,10 +403,10 @@ void write_model_text(const Model& model, const fs::path& dir) {
   const ModelPaths paths = ModelPaths::text(dir);
   validate_model(model, paths);  // never write a model we would refuse to read
   check_names_writable(model, paths.images);
-  detail::make_directory(dir);
-  detail::write_file(paths.cameras, encode_cameras(model.cameras));
-  detail::write_file(paths.images, encode_images(model.images));
-  detail::write_file(paths.points, encode_points(model.points));
+  make_directory(dir);
+  write_file(paths.cameras, encode_cameras(model.cameras));
+  write_file(paths.images, encode_images(model.images));
+  write_file(paths.points, encode_points(model.points));
 }
 
 }  // namespace desplat::colmap

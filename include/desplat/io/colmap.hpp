@@ -164,14 +164,5 @@ struct ModelPaths {
 // belongs to.
 void validate_model(const Model& model, const ModelPaths& paths);
 
-namespace detail {
-// Internal helpers shared by src/io/colmap_model.cpp and colmap_text.cpp; not API.
-// Whole-file I/O shared by the binary and text code. ColmapError names the path when the file
-// is missing, not a regular file, or cannot be read or written.
-std::string read_file(const std::filesystem::path& path);
-void write_file(const std::filesystem::path& path, std::string_view bytes);
-// Creates `dir` (and parents) for a writer; ColmapError naming it on failure.
-void make_directory(const std::filesystem::path& dir);
-}  // namespace detail
 
 }  // namespace desplat::colmap
