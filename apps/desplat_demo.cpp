@@ -19,7 +19,7 @@ using desplat::Camera;
 using desplat::GaussianSet;
 
 constexpr float kShY0 = 0.28209479177387814f;
-const std::array<float, 3> kEvalBackground = desplat::TrainConfig{}.eval_background;  // REFERENCE.md §4
+const std::array<float, 3> kEvalBackground = desplat::TrainConfig{}.eval_background;  // docs/METHOD.md §4
 
 // A checkered floor, a hue-striped sphere and a ring of small glossy Gaussians.
 GaussianSet demo_scene() {

@@ -3,7 +3,7 @@
 //     frustum of a 512×384 camera, depths 2–10, world sizes 0.005–0.035 (about
 //     0.2–7 px on screen), SH degree 3;
 //   * fox: the 12,421-point COLMAP model of ../shared/data/fox initialized as in
-//     training (REFERENCE.md §5), seen from its first camera at 540×960.
+//     training (docs/METHOD.md §5), seen from its first camera at 540×960.
 // Counters: pairs = Gaussian–pixel pairs whose α was evaluated per call;
 // time_per_pair = wall time per evaluated pair.
 #include <benchmark/benchmark.h>
@@ -53,7 +53,7 @@ Scene frustum_scene(int n) {
   return s;
 }
 
-// Fox points in the normalized frame of REFERENCE.md §1, seen from the first image.
+// Fox points in the normalized frame of docs/METHOD.md §1, seen from the first image.
 Scene fox_scene() {
   const std::filesystem::path dir = DESPLAT_FOX_DIR "/sparse/0";
   const colmap::Model model = colmap::read_model(dir);

@@ -1,4 +1,4 @@
-// DeSplat's decomposed compositing (REFERENCE.md §4): the composite's hand-written
+// DeSplat's decomposed compositing (docs/METHOD.md §4): the composite's hand-written
 // gradient against ceres::Jet per pixel, and the whole two-layer pipeline (static and
 // distractor kernels → composite → loss + opacity regularizers) against exact
 // derivatives through the brute-force double reference renderer.

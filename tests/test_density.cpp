@@ -1,4 +1,4 @@
-// Adaptive density control on hand-built Gaussians whose fate REFERENCE.md §7 decides.
+// Adaptive density control on hand-built Gaussians whose fate docs/METHOD.md §7 decides.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>

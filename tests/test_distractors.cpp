@@ -1,4 +1,4 @@
-// DeSplat's per-view distractor Gaussians: initialization (REFERENCE.md §5), the refinement
+// DeSplat's per-view distractor Gaussians: initialization (docs/METHOD.md §5), the refinement
 // schedule and rules (§7), and their life inside the trainer (only their view touches them,
 // emptied views cost nothing, ablation switches, checkpoints resume bit-exactly).
 #include <gtest/gtest.h>

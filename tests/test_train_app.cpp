@@ -64,7 +64,7 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   nlohmann::json config;
   std::ifstream(out / "config.json") >> config;
   EXPECT_EQ(config["train"]["iterations"], 120);
-  EXPECT_EQ(config["train"]["lr"]["means"], 1.6e-4f);  // REFERENCE.md defaults are written out
+  EXPECT_EQ(config["train"]["lr"]["means"], 1.6e-4f);  // docs/METHOD.md defaults are written out
 
   // desplat_render re-renders the test views as the evaluation saw them.
   const fs::path renders = root_ / "renders";

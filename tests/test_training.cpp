@@ -164,7 +164,7 @@ TEST(Training, NoPointsInitializesRandomlyInACube) {
   data.points.clear();
   data.colors.clear();
   TrainConfig cfg = short_config(10);
-  cfg.random_init_points = 5000;  // the default is 50,000 (REFERENCE.md §5); fewer keeps the test fast
+  cfg.random_init_points = 5000;  // the default is 50,000 (docs/METHOD.md §5); fewer keeps the test fast
   Trainer trainer(data, cfg);
   ASSERT_EQ(trainer.gaussians().size(), 5000u);
   for (float m : trainer.gaussians().params.means) ASSERT_LE(std::abs(m), cfg.random_init_extent);

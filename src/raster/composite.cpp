@@ -1,4 +1,4 @@
-// Decomposed compositing, its gradient, and the opacity regularizers (REFERENCE.md §4).
+// Decomposed compositing, its gradient, and the opacity regularizers (docs/METHOD.md §4).
 #include "desplat/raster/composite.hpp"
 
 #include <algorithm>

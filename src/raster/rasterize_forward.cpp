@@ -23,7 +23,7 @@ int effective_sh_degree(const GaussianView& g, const RasterSettings& s) {
   return d;
 }
 
-// Projection, culling, color and opacity for every Gaussian (REFERENCE.md §3).
+// Projection, culling, color and opacity for every Gaussian (docs/METHOD.md §3).
 void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& s, int sh_degree,
                 RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(g.size());

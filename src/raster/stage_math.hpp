@@ -2,7 +2,7 @@
 // a template over the scalar type: the kernels instantiate it with float, the tests
 // with double (reference) and ceres::Jet (exact derivatives). The hand-written
 // vector–Jacobian products (`*_vjp`, float) sit next to the function they invert.
-// Equations: REFERENCE.md §2–3.
+// Equations: docs/METHOD.md §2–3.
 #pragma once
 
 #include <Eigen/Core>

@@ -1,4 +1,4 @@
-// Split / duplicate / cull / opacity reset (REFERENCE.md §7).
+// Split / duplicate / cull / opacity reset (docs/METHOD.md §7).
 #include "desplat/train/density.hpp"
 
 #include <Eigen/Geometry>

@@ -1,4 +1,4 @@
-// Initialization of static Gaussians from a point cloud (REFERENCE.md §5).
+// Initialization of static Gaussians from a point cloud (docs/METHOD.md §5).
 #include "desplat/train/init.hpp"
 
 #include <nanoflann.hpp>

@@ -1,7 +1,7 @@
 // The training loop: one view per step; the static and the view's distractor layer are
 // rendered separately and composited over a random background; photometric loss plus
 // the opacity regularizers; backward through the composite into both; Adam; density
-// control (REFERENCE.md §4–7).
+// control (docs/METHOD.md §4–7).
 #include "desplat/train/trainer.hpp"
 
 #include <algorithm>
@@ -23,7 +23,7 @@ double seconds_since(Clock::time_point t0) { return std::chrono::duration<double
 
 GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, std::mt19937_64& rng) {
   if (!data.points.empty()) return init_gaussians_from_points(data.points, data.colors, cfg.sh_degree, rng());
-  // No points (REFERENCE.md §5): uniform in a cube, random colors.
+  // No points (docs/METHOD.md §5): uniform in a cube, random colors.
   std::uniform_real_distribution<float> u(-cfg.random_init_extent, cfg.random_init_extent);
   std::uniform_int_distribution<int> byte(0, 255);
   std::vector<std::array<float, 3>> xyz(cfg.random_init_points);

@@ -1,5 +1,5 @@
 // A small scene with known ground truth for training tests: a ground-truth Gaussian
-// set rendered from cameras on a circle of radius 1 (the scale REFERENCE.md §1's
+// set rendered from cameras on a circle of radius 1 (the scale docs/METHOD.md §1's
 // normalization gives real captures, so default learning rates and thresholds apply). Every 4th camera is a held-out test view.
 #pragma once
 

@@ -1,6 +1,6 @@
 // Pinhole camera as the rasterizer sees it.
 //
-// Frames and units (REFERENCE.md §1, COLMAP convention):
+// Frames and units (docs/METHOD.md §1, COLMAP convention):
 //   * world-to-camera: p_cam = R_cw · p_world + t_cw; the camera looks along +z,
 //     x points right and y points down in the image.
 //   * intrinsics in pixels: u = fx·x/z + cx, v = fy·y/z + cy. Pixel (i, j) covers

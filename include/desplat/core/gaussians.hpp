@@ -2,7 +2,7 @@
 // per attribute) so the per-Gaussian loops read memory linearly and the arrays can
 // be handed to the optimizer group by group.
 //
-// Parameterization (REFERENCE.md §2), all in the world frame:
+// Parameterization (docs/METHOD.md §2), all in the world frame:
 //   means           [N, 3]  position μ [world units]
 //   log_scales      [N, 3]  s, with per-axis standard deviation exp(s) [world units]
 //   quats           [N, 4]  (w, x, y, z); need not be normalized (the kernel does it)

@@ -1,4 +1,4 @@
-// The normalized training frame (REFERENCE.md §1) and the way back to the input frame.
+// The normalized training frame (docs/METHOD.md §1) and the way back to the input frame.
 //
 // normalized = (original − center) · scale, a translation and a uniform scale with
 // no rotation, so quaternions and SH coefficients are the same in both frames and a

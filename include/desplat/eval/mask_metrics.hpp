@@ -1,4 +1,4 @@
-// How well a trained DeSplat model's distractor masks (A_d > 0.5, REFERENCE.md §8) match a
+// How well a trained DeSplat model's distractor masks (A_d > 0.5, docs/METHOD.md §8) match a
 // scene's ground-truth distractor masks (masks.hpp), per training view and on average.
 //
 // Ownership and threads: plain values; evaluate_distractor_masks renders with the trainer's

@@ -2,7 +2,7 @@
 // table of small functions, keyed by colmap::CameraModelId (names and parameter lists are in
 // colmap::camera_model_info).
 //
-// Frames and units (REFERENCE.md §1, COLMAP convention):
+// Frames and units (docs/METHOD.md §1, COLMAP convention):
 //   * a camera-plane point is (u, v) = (x/z, y/z) of a point in camera space (x right, y down,
 //     z forward); it is unitless.
 //   * pixels: COLMAP's convention, the center of pixel (i, j) is at (i + 0.5, j + 0.5).

@@ -1,7 +1,7 @@
 // COLMAP sparse models: cameras, images and points3D in COLMAP's binary (.bin) and text
 // (.txt) forms, with the layouts of COLMAP's "Output Format" documentation.
 //
-// Frames and units (REFERENCE.md §1):
+// Frames and units (docs/METHOD.md §1):
 //   * Image::qvec_wxyz and Image::tvec are the world-to-camera rotation (Hamilton quaternion,
 //     w first) and translation: p_cam = R(q)·p_world + t; the camera center is −R(q)ᵀ·t.
 //     The camera looks along +z, x right, y down. q is kept exactly as stored in the file

@@ -1,4 +1,4 @@
-// Standard 3D Gaussian Splatting PLY files (REFERENCE.md §9), the format read by the
+// Standard 3D Gaussian Splatting PLY files (docs/METHOD.md §9), the format read by the
 // original 3DGS code, gsplat/nerfstudio exporters and the common web viewers.
 //
 // File layout: "ply", "format binary_little_endian 1.0", "element vertex N", then one

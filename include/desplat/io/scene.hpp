@@ -11,7 +11,7 @@
 // The input is only read, never written (it may be read-only, like /work/shared).
 //
 // Frames and units:
-//   * World: the normalized frame of REFERENCE.md §1, x_n = (x − center)·scale, with center =
+//   * World: the normalized frame of docs/METHOD.md §1, x_n = (x − center)·scale, with center =
 //     mean of the camera centers of ALL registered images (before the split, as nerfstudio)
 //     and scale = 1 / (largest |coordinate| of a centered camera center); scale = 1 when
 //     there is one camera or all centers coincide. `normalization` maps back.

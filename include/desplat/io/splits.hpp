@@ -1,4 +1,4 @@
-// Train/test splits of a capture's images (REFERENCE.md §8).
+// Train/test splits of a capture's images (docs/METHOD.md §8).
 //
 // Every rule sees the registered image names exactly as the COLMAP model stores them
 // (paths relative to images/, e.g. "0001.jpg" or "cam0/0001.jpg") and gives each one a

@@ -1,5 +1,5 @@
 // Undistortion of COLMAP cameras and photos to the pinhole model the rasterizer uses
-// (REFERENCE.md §1: distorted models are undistorted before training, as COLMAP's
+// (docs/METHOD.md §1: distorted models are undistorted before training, as COLMAP's
 // image_undistorter does).
 //
 // Pixels follow COLMAP's convention (pixel (i, j) has its center at (i + 0.5, j + 0.5)).

@@ -1,4 +1,4 @@
-// DeSplat's decomposed compositing (REFERENCE.md §4): the static layer (C_s, A_s) and a
+// DeSplat's decomposed compositing (docs/METHOD.md §4): the static layer (C_s, A_s) and a
 // training view's distractor layer (C_d, A_d), each rendered separately by the
 // rasterizer, are composited over the background:
 //
@@ -45,7 +45,7 @@ struct CompositeGradients {
 void composite_layers_backward(Layer statics, Layer distractor, const std::array<float, 3>& background,
                                std::span<const float> d_out, const CompositeGradients& grads);
 
-// λ_s·mean(1 − A_s) + λ_d·mean(A_d) (REFERENCE.md §4): pushes the static layer to be
+// λ_s·mean(1 − A_s) + λ_d·mean(A_d) (docs/METHOD.md §4): pushes the static layer to be
 // opaque and the distractor layer to be transparent unless the photometric loss needs
 // it. Returns the value and ADDS its gradient to d_static_alpha / d_distractor_alpha
 // (the distractor ones are skipped when empty).
@@ -68,7 +68,7 @@ struct ViewLayers {
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
                               const RasterSettings& settings, const std::array<float, 3>& background);
 
-// A pixel is a distractor pixel where A_d exceeds this (REFERENCE.md §8).
+// A pixel is a distractor pixel where A_d exceeds this (docs/METHOD.md §8).
 constexpr float kDistractorMaskThreshold = 0.5f;
 
 // The distractor mask of a view: 1 where A_d > kDistractorMaskThreshold, else 0 ([H, W, 1]).

@@ -1,6 +1,6 @@
 // CPU Gaussian splatting: forward rendering and its hand-written backward pass.
 //
-// Semantics follow gsplat 1.5's "classic" rasterizer exactly (REFERENCE.md §3): EWA
+// Semantics follow gsplat 1.5's "classic" rasterizer exactly (docs/METHOD.md §3): EWA
 // projection with a 0.3 px² blur, 3.33σ extents, 16×16 tiles with per-tile depth
 // order, front-to-back blending with α = min(0.999, o·exp(−σ)), α < 1/255 skipped and
 // a pixel finished once its transmittance would reach 1e-4.
@@ -79,7 +79,7 @@ struct RasterGradients {
   std::vector<float> opacity_logits;  // [N]
   std::vector<float> colors;          // same shape as GaussianView::colors
   std::vector<float> means2d;         // [N, 2] ∂L/∂μ2d (summed over pixels)
-  // Densification statistic (REFERENCE.md §3): per Gaussian, the 2-norm of
+  // Densification statistic (docs/METHOD.md §3): per Gaussian, the 2-norm of
   // (Σ_pixels |∂L/∂μ2d.x|, Σ_pixels |∂L/∂μ2d.y|) [loss units per px].
   std::vector<float> absgrad;         // [N]
 

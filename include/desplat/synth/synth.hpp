@@ -19,7 +19,7 @@
 // view when k % 8 == 0, so `desplat_train --data <out>` needs no split options.
 //
 // Frames and units: the world is right-handed with z up, in "world units" (the scene is a few
-// units across). Camera poses follow COLMAP (REFERENCE.md §1): p_cam = R·p_world + t, camera
+// units across). Camera poses follow COLMAP (docs/METHOD.md §1): p_cam = R·p_world + t, camera
 // looking along +z, x right, y down. Pixel (i, j) has its center at (i + 0.5, j + 0.5); a
 // pixel of a distorted camera sees the ray camera_from_image (camera_models.hpp) gives for it.
 // Colors are in [0, 1] and written as 8-bit PNG without a transfer curve.

@@ -1,4 +1,4 @@
-// Adaptive density control for static Gaussians (REFERENCE.md §7, Splatfacto defaults).
+// Adaptive density control for static Gaussians (docs/METHOD.md §7, Splatfacto defaults).
 // Thresholds are in the normalized world frame (§1) and in screen fractions.
 #pragma once
 
@@ -41,7 +41,7 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
 // One refinement regardless of the schedule: densify (split/duplicate) when `densify`,
 // then cull (opacity, and the scale/screen-size rules by `step`); with `cull_unseen`
 // also every Gaussian not seen since the last refinement (zero max screen radius: the
-// per-view distractor rule of REFERENCE.md §7). No opacity reset. Clears the statistics.
+// per-view distractor rule of docs/METHOD.md §7). No opacity reset. Clears the statistics.
 RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
                                    bool densify, bool cull_unseen, std::mt19937_64& rng);
 

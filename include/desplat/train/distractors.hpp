@@ -1,4 +1,4 @@
-// DeSplat's per-view distractor Gaussians (REFERENCE.md §5–7): every training view owns a
+// DeSplat's per-view distractor Gaussians (docs/METHOD.md §5–7): every training view owns a
 // small set of Gaussians with plain RGB colors that only that view renders and updates.
 // They live in the normalized world frame like the static Gaussians; at initialization
 // they sit on a small plane just in front of their camera.

@@ -1,4 +1,4 @@
-// Initial Gaussians (REFERENCE.md §5), in whatever frame the points are given.
+// Initial Gaussians (docs/METHOD.md §5), in whatever frame the points are given.
 #pragma once
 
 #include <array>

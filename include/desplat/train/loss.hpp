@@ -1,4 +1,4 @@
-// Photometric loss of REFERENCE.md §4 and the image metrics used for evaluation.
+// Photometric loss of docs/METHOD.md §4 and the image metrics used for evaluation.
 //
 // Images are row-major [H, W, 3] floats (values nominally in [0, 1]). SSIM uses an
 // 11×11 Gaussian window (σ = 1.5), K1 = 0.01, K2 = 0.03, data range 1, and only the

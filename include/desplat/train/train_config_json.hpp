@@ -1,4 +1,4 @@
-// TrainConfig ⇄ JSON. Every field has a name; the defaults are REFERENCE.md's. Reading
+// TrainConfig ⇄ JSON. Every field has a name; the defaults are docs/METHOD.md's. Reading
 // rejects unknown keys and wrongly typed values with the key's path in the message.
 #pragma once
 

@@ -16,7 +16,7 @@ namespace desplat {
 enum class ParamGroup { Means = 0, LogScales, Quats, OpacityLogits, Colors };
 constexpr int kParamGroups = 5;
 
-// Adam hyper-parameters (REFERENCE.md §6).
+// Adam hyper-parameters (docs/METHOD.md §6).
 struct AdamSettings {
   float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
 };
@@ -32,7 +32,7 @@ struct TrainableGaussians {
   GaussianSet params;
   std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params
   int64_t adam_step = 0;  // Adam's bias-correction step count (one for all groups)
-  // Densification statistics since the last refinement (REFERENCE.md §7).
+  // Densification statistics since the last refinement (docs/METHOD.md §7).
   std::vector<float> absgrad_sum;     // [N] Σ over steps of the absgrad statistic
   std::vector<int32_t> visible_count; // [N] steps in which the Gaussian was visible
   std::vector<float> max_screen_radius;  // [N] max over steps of radius / max(W, H)

@@ -1,4 +1,4 @@
-// DeSplat training on the CPU (REFERENCE.md §4–7): static Gaussians shared by all views
+// DeSplat training on the CPU (docs/METHOD.md §4–7): static Gaussians shared by all views
 // plus, per training view, distractor Gaussians only that view renders; with
 // config.distractors.enabled = false it is the static Splatfacto baseline.
 //
