@@ -12,9 +12,11 @@
 
 namespace desplat::testing {
 
+// Absolute and without "..", as the scene loader reports paths.
 inline std::filesystem::path fox_dir() {
-  if (const char* env = std::getenv("DESPLAT_FOX_DIR"); env != nullptr && *env != '\0') return env;
-  return DESPLAT_FOX_DIR_DEFAULT;
+  const char* env = std::getenv("DESPLAT_FOX_DIR");
+  const std::filesystem::path dir = env != nullptr && *env != '\0' ? env : DESPLAT_FOX_DIR_DEFAULT;
+  return std::filesystem::weakly_canonical(std::filesystem::absolute(dir));
 }
 
 inline bool fox_available() { return std::filesystem::exists(fox_dir() / "sparse" / "0"); }
