@@ -18,12 +18,13 @@
 #include "desplat/synth/occluders.hpp"
 #include "desplat/synth/synth.hpp"
 #include "desplat/jobs/training_run.hpp"
+#include "support/fox_scene.hpp"
 
 namespace desplat {
 namespace {
 namespace fs = std::filesystem;
 
-const fs::path kFox = "/work/shared/data/fox";
+const fs::path kFox = desplat::testing::fox_dir();
 
 double mean_of(const std::vector<ViewMetrics>& v, double ViewMetrics::*field) {
   double s = 0;
@@ -94,7 +95,7 @@ TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccl
   fs::remove_all(dir);
 }
 
-// The same comparison on the tiny synthetic scene with known ground truth (issue 6):
+// The same comparison on the tiny synthetic scene with known ground truth:
 // data/synthetic/tiny_tracks.json, 80×60, 21 training views all cluttered with 1–2 objects
 // that stay in the frame for 4 consecutive views, 3 clean test views, 2,000 steps.
 TEST(DeSplatEvidence, TinySyntheticSceneStaticLayerBeatsTheBaselineAndMasksMatch) {

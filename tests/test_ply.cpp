@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "desplat/io/ply.hpp"
+#include "support/temp_dir.hpp"
 
 namespace desplat {
 namespace {
@@ -34,17 +35,10 @@ using ::testing::StartsWith;
 
 class Ply : public ::testing::Test {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() /
-           ("desplat_test_ply_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
   fs::path file(const std::string& name) const { return dir_ / name; }
 
-  fs::path dir_;
+  desplat::testing::TempDir tmp_{"ply"};
+  const fs::path dir_ = tmp_.path();
 };
 
 std::string le_bytes(const std::vector<float>& values) {

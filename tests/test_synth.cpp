@@ -22,29 +22,16 @@
 #include "desplat/io/image_io.hpp"
 #include "desplat/io/scene.hpp"
 #include "desplat/synth/synth.hpp"
+#include "support/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace desplat;
 using json = nlohmann::json;
 
 namespace {
+using desplat::testing::TempDir;
 
 const fs::path kDescriptions = fs::path(DESPLAT_SOURCE_DIR) / "data" / "synthetic";
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    static int counter = 0;
-    path = fs::temp_directory_path() /
-           ("desplat_test_synth_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
 synth::Description tiny(const std::string& name, const json& patch = json::object()) {
   const synth::Description d = synth::load_description(kDescriptions / name);
@@ -164,9 +151,9 @@ TEST(Synth, TinyCleanLoadsWithOurReaderAndTheSceneLoader) {
   ASSERT_EQ(d.camera.width, 64);
   ASSERT_EQ(d.camera.height, 48);
   ASSERT_EQ(d.views.count, 8);
-  const auto report = generate(d, t.path / "scene");
+  const auto report = generate(d, t.path() / "scene");
 
-  const colmap::Model m = colmap::read_model(t.path / "scene" / "sparse" / "0");
+  const colmap::Model m = colmap::read_model(t.path() / "scene" / "sparse" / "0");
   ASSERT_EQ(m.cameras.size(), 1u);
   EXPECT_EQ(m.cameras.begin()->second.width, 64u);
   EXPECT_EQ(m.cameras.begin()->second.height, 48u);
@@ -180,30 +167,30 @@ TEST(Synth, TinyCleanLoadsWithOurReaderAndTheSceneLoader) {
   for (const auto& [id, p] : m.points) EXPECT_GE(p.track.size(), 2u) << "point " << id;
 
   SceneOptions o;
-  o.cache_dir = t.path / "cache";
+  o.cache_dir = t.path() / "cache";
   o.on_warning = [](const std::string& w) { ADD_FAILURE() << w; };
-  const Scene scene = load_colmap_scene(t.path / "scene", o);
+  const Scene scene = load_colmap_scene(t.path() / "scene", o);
   ASSERT_EQ(scene.views.size(), 8u);
   ASSERT_EQ(scene.test_views().size(), 1u);
   EXPECT_EQ(scene.views[scene.test_views()[0]].name, "0000.png");
   EXPECT_EQ(scene.points_xyz.size(), m.points.size());
-  EXPECT_EQ(lines_of(t.path / "scene" / "test_list.txt"), std::vector<std::string>{"0000.png"});
-  EXPECT_EQ(lines_of(t.path / "scene" / "train_list.txt").size(), 7u);
+  EXPECT_EQ(lines_of(t.path() / "scene" / "test_list.txt"), std::vector<std::string>{"0000.png"});
+  EXPECT_EQ(lines_of(t.path() / "scene" / "train_list.txt").size(), 7u);
   const FloatImage img = load_view_image(scene, 3);
   EXPECT_EQ(img.width, 64);
   EXPECT_EQ(img.height, 48);
   // scene.json is the effective description and reads back as the same description.
-  EXPECT_EQ(synth::load_description(t.path / "scene" / "scene.json"), d);
+  EXPECT_EQ(synth::load_description(t.path() / "scene" / "scene.json"), d);
 }
 
 TEST(Synth, ColmapModelAnalyzerAcceptsTheModel) {
   if (std::system("command -v colmap > /dev/null 2>&1") != 0) GTEST_SKIP() << "colmap is not on PATH";
   TempDir t;
-  generate(tiny("tiny_distractors.json"), t.path / "scene");
-  const colmap::Model m = colmap::read_model(t.path / "scene" / "sparse" / "0");
-  const fs::path log = t.path / "analyzer.log";
+  generate(tiny("tiny_distractors.json"), t.path() / "scene");
+  const colmap::Model m = colmap::read_model(t.path() / "scene" / "sparse" / "0");
+  const fs::path log = t.path() / "analyzer.log";
   const std::string cmd =
-      "colmap model_analyzer --path '" + (t.path / "scene" / "sparse" / "0").string() + "' > '" + log.string() + "' 2>&1";
+      "colmap model_analyzer --path '" + (t.path() / "scene" / "sparse" / "0").string() + "' > '" + log.string() + "' 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << bytes_of(log);
   const std::string text = bytes_of(log);
   std::smatch images, points;
@@ -215,8 +202,8 @@ TEST(Synth, ColmapModelAnalyzerAcceptsTheModel) {
 
 TEST(Synth, PointsProjectExactlyOntoTheirObservationsWithoutNoise) {
   TempDir t;
-  generate(tiny("tiny_clean.json", {{"points.position_noise_px", 0}, {"points.observation_noise_px", 0}}), t.path / "s");
-  const Residuals r = residuals(colmap::read_model(t.path / "s" / "sparse" / "0"));
+  generate(tiny("tiny_clean.json", {{"points.position_noise_px", 0}, {"points.observation_noise_px", 0}}), t.path() / "s");
+  const Residuals r = residuals(colmap::read_model(t.path() / "s" / "sparse" / "0"));
   ASSERT_GT(r.count, 500u);
   EXPECT_LT(r.max, 1e-6);
 }
@@ -224,8 +211,8 @@ TEST(Synth, PointsProjectExactlyOntoTheirObservationsWithoutNoise) {
 TEST(Synth, PointNoiseHasTheDescribedSize) {
   TempDir t;
   const auto d = tiny("tiny_clean.json", {{"points.count", 1500}});
-  generate(d, t.path / "s");
-  const Residuals r = residuals(colmap::read_model(t.path / "s" / "sparse" / "0"));
+  generate(d, t.path() / "s");
+  const Residuals r = residuals(colmap::read_model(t.path() / "s" / "sparse" / "0"));
   // Per axis the reprojected error is N(0, σp² + σo²); its 2D length has mean σ·sqrt(π/2).
   const double sigma = std::hypot(d.points.position_noise_px, d.points.observation_noise_px);
   ASSERT_GT(sigma, 0.2);
@@ -241,8 +228,8 @@ TEST(Synth, DistortedForwardFacingCameraProjectsAndRendersThroughItsLens) {
                                           {"supersampling", 1},
                                           {"points.position_noise_px", 0},
                                           {"points.observation_noise_px", 0}});
-  generate(d, t.path / "s");
-  const colmap::Model m = colmap::read_model(t.path / "s" / "sparse" / "0");
+  generate(d, t.path() / "s");
+  const colmap::Model m = colmap::read_model(t.path() / "s" / "sparse" / "0");
   ASSERT_EQ(m.cameras.at(1).model, colmap::CameraModelId::OpenCV);
   const Residuals r = residuals(m);
   ASSERT_GT(r.count, 500u);
@@ -253,7 +240,7 @@ TEST(Synth, DistortedForwardFacingCameraProjectsAndRendersThroughItsLens) {
   double err_lens = 0, err_pinhole = 0;
   int n = 0;
   std::map<uint32_t, FloatImage> clean;
-  for (const auto& [id, im] : m.images) clean[id] = read_image_rgb(t.path / "s" / "clean" / im.name);
+  for (const auto& [id, im] : m.images) clean[id] = read_image_rgb(t.path() / "s" / "clean" / im.name);
   for (const auto& [id, p] : m.points)
     for (const auto& tr : p.track) {
       const colmap::Image& im = m.images.at(tr.image_id);
@@ -279,14 +266,14 @@ TEST(Synth, MasksAreNonEmptyExactlyInTheClutteredTrainingViews) {
   TempDir t;
   const auto d = tiny("tiny_distractors.json");
   ASSERT_EQ(d.views.count, 16);
-  const auto report = generate(d, t.path / "s");
+  const auto report = generate(d, t.path() / "s");
   const std::set<std::string> expected = expected_cluttered(16, d.distractors.clutter_ratio);
   ASSERT_EQ(expected.size(), 7u);  // round(0.5 · 14)
   EXPECT_EQ(std::set<std::string>(report.cluttered_views.begin(), report.cluttered_views.end()), expected);
   for (int k = 0; k < 16; ++k) {
     const std::string name = synth::view_name(k, 16);
-    const fs::path mask_file = t.path / "s" / "distractor_masks" / name;
-    const std::string images = bytes_of(t.path / "s" / "images" / name), clean = bytes_of(t.path / "s" / "clean" / name);
+    const fs::path mask_file = t.path() / "s" / "distractor_masks" / name;
+    const std::string images = bytes_of(t.path() / "s" / "images" / name), clean = bytes_of(t.path() / "s" / "clean" / name);
     if (k % 8 == 0) {  // test view: no mask, no distractors
       EXPECT_FALSE(fs::exists(mask_file)) << name;
       EXPECT_EQ(images, clean) << name;
@@ -299,8 +286,8 @@ TEST(Synth, MasksAreNonEmptyExactlyInTheClutteredTrainingViews) {
       continue;
     }
     // Under the mask the photo shows the distractor; away from it (and its edge) the clean scene.
-    const FloatImage photo = read_image_rgb(t.path / "s" / "images" / name);
-    const FloatImage still = read_image_rgb(t.path / "s" / "clean" / name);
+    const FloatImage photo = read_image_rgb(t.path() / "s" / "images" / name);
+    const FloatImage still = read_image_rgb(t.path() / "s" / "clean" / name);
     int masked = 0, masked_changed = 0, far_changed = 0;
     for (int y = 0; y < 48; ++y)
       for (int x = 0; x < 64; ++x) {
@@ -334,10 +321,10 @@ TEST(Synth, DistractorTracksRepeatTheSameObjectsInTheFrameForConsecutiveTraining
   TempDir t;
   generate(tiny("tiny_distractors.json", {{"distractors.clutter_ratio", 1.0}, {"distractors.track_length", 3},
                                           {"supersampling", 1}, {"points.count", 0}}),
-           t.path / "s");
+           t.path() / "s");
   std::vector<FloatImage> masks;
   for (int k = 0; k < 16; ++k)
-    if (k % 8 != 0) masks.push_back(read_image_rgb(t.path / "s" / "distractor_masks" / synth::view_name(k, 16)));
+    if (k % 8 != 0) masks.push_back(read_image_rgb(t.path() / "s" / "distractor_masks" / synth::view_name(k, 16)));
   ASSERT_EQ(masks.size(), 14u);
   const auto iou = [](const FloatImage& a, const FloatImage& b) {
     double both = 0, either = 0;
@@ -359,12 +346,12 @@ TEST(Synth, DistractorTracksRepeatTheSameObjectsInTheFrameForConsecutiveTraining
 
 TEST(Synth, WithOneSamplePerPixelTheMaskIsExactlyWhereThePhotoShowsADistractor) {
   TempDir t;
-  const auto report = generate(tiny("tiny_distractors.json", {{"supersampling", 1}, {"points.count", 0}}), t.path / "s");
+  const auto report = generate(tiny("tiny_distractors.json", {{"supersampling", 1}, {"points.count", 0}}), t.path() / "s");
   ASSERT_FALSE(report.cluttered_views.empty());
   for (const std::string& name : report.cluttered_views) {
-    const FloatImage mask = read_image_rgb(t.path / "s" / "distractor_masks" / name);
-    const FloatImage photo = read_image_rgb(t.path / "s" / "images" / name);
-    const FloatImage still = read_image_rgb(t.path / "s" / "clean" / name);
+    const FloatImage mask = read_image_rgb(t.path() / "s" / "distractor_masks" / name);
+    const FloatImage photo = read_image_rgb(t.path() / "s" / "images" / name);
+    const FloatImage still = read_image_rgb(t.path() / "s" / "clean" / name);
     int disagree = 0, masked = 0;
     for (size_t p = 0; p < mask.pixels.size() / 3; ++p) {
       bool changed = false;
@@ -381,11 +368,11 @@ TEST(Synth, ClutterRatioIsHonoured) {
   for (const double ratio : {0.0, 0.2, 0.6, 1.0}) {
     TempDir t;
     const auto d = tiny("tiny_distractors.json", {{"distractors.clutter_ratio", ratio}, {"points.count", 0}});
-    const auto report = generate(d, t.path / "s");
+    const auto report = generate(d, t.path() / "s");
     const auto expected = expected_cluttered(16, ratio);
     EXPECT_EQ(std::set<std::string>(report.cluttered_views.begin(), report.cluttered_views.end()), expected) << ratio;
     size_t non_empty = 0;
-    for (const auto& e : fs::directory_iterator(t.path / "s" / "distractor_masks"))
+    for (const auto& e : fs::directory_iterator(t.path() / "s" / "distractor_masks"))
       non_empty += any_nonzero(read_image_rgb(e.path()));
     EXPECT_EQ(non_empty, static_cast<size_t>(std::lround(ratio * 14))) << ratio;
   }
@@ -393,7 +380,7 @@ TEST(Synth, ClutterRatioIsHonoured) {
 
 TEST(Synth, NoEffectsMeansNoEffectsWork) {
   TempDir t;
-  const auto report = generate(tiny("tiny_clean.json"), t.path / "s");
+  const auto report = generate(tiny("tiny_clean.json"), t.path() / "s");
   EXPECT_EQ(report.distractor_ray_tests, 0u);
   EXPECT_EQ(report.sky_evaluations, 0u);
   EXPECT_EQ(report.exposure_pixels, 0u);
@@ -401,9 +388,9 @@ TEST(Synth, NoEffectsMeansNoEffectsWork) {
   EXPECT_TRUE(report.cluttered_views.empty());
   for (int k = 0; k < 8; ++k) {
     const std::string name = synth::view_name(k, 8);
-    EXPECT_EQ(bytes_of(t.path / "s" / "images" / name), bytes_of(t.path / "s" / "clean" / name)) << name;
+    EXPECT_EQ(bytes_of(t.path() / "s" / "images" / name), bytes_of(t.path() / "s" / "clean" / name)) << name;
     if (k % 8 != 0) {
-      EXPECT_FALSE(any_nonzero(read_image_rgb(t.path / "s" / "distractor_masks" / name))) << name;
+      EXPECT_FALSE(any_nonzero(read_image_rgb(t.path() / "s" / "distractor_masks" / name))) << name;
     }
   }
 }
@@ -418,7 +405,7 @@ TEST(Synth, EachEffectWorksAlone) {
                                 {{{"sky.enabled", true}, {"views.height", 0.2}}, true}};
   for (const Case& c : cases) {
     TempDir t;
-    const auto report = generate(tiny("tiny_clean.json", c.patch), t.path / "s");
+    const auto report = generate(tiny("tiny_clean.json", c.patch), t.path() / "s");
     const bool noise = c.patch.contains("noise.sigma"), exposure = c.patch.contains("exposure.stops");
     const bool sky = c.patch.contains("sky.enabled");
     EXPECT_EQ(report.noise_pixels > 0, noise) << c.patch;
@@ -427,14 +414,14 @@ TEST(Synth, EachEffectWorksAlone) {
     EXPECT_EQ(report.distractor_ray_tests, 0u) << c.patch;
     for (int k = 0; k < 8; ++k) {
       const std::string name = synth::view_name(k, 8);
-      const bool same = bytes_of(t.path / "s" / "images" / name) == bytes_of(t.path / "s" / "clean" / name);
+      const bool same = bytes_of(t.path() / "s" / "images" / name) == bytes_of(t.path() / "s" / "clean" / name);
       // The sky is part of the static scene: it is in the clean images too.
       const bool photo_effect = !sky && (k % 8 != 0 || c.changes_test_views);
       EXPECT_EQ(same, !photo_effect) << c.patch << " " << name;
     }
     if (exposure) {  // the photo is the clean image times a per-channel gain within the range
-      const FloatImage photo = read_image_rgb(t.path / "s" / "images" / "0003.png");
-      const FloatImage still = read_image_rgb(t.path / "s" / "clean" / "0003.png");
+      const FloatImage photo = read_image_rgb(t.path() / "s" / "images" / "0003.png");
+      const FloatImage still = read_image_rgb(t.path() / "s" / "clean" / "0003.png");
       for (int ch = 0; ch < 3; ++ch) {
         double a = 0, b = 0;
         for (size_t i = static_cast<size_t>(ch); i < photo.pixels.size(); i += 3)
@@ -451,16 +438,16 @@ TEST(Synth, SameSeedSameBytesAnyThreadCountDifferentSeedDifferentScene) {
   const auto d = tiny("tiny_distractors.json", {{"noise.sigma", 0.02}, {"exposure.stops", 0.3}, {"views.position_jitter", 0.1}});
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
-  generate(d, t.path / "a");
+  generate(d, t.path() / "a");
   omp_set_num_threads(std::max(2, threads));
-  generate(d, t.path / "b");
+  generate(d, t.path() / "b");
   omp_set_num_threads(threads);
-  const auto a = tree(t.path / "a"), b = tree(t.path / "b");
+  const auto a = tree(t.path() / "a"), b = tree(t.path() / "b");
   ASSERT_EQ(a.size(), 16u * 2 + 14 + 3 + 3);  // images, clean, masks, sparse, lists + scene.json
   EXPECT_TRUE(a == b);
 
-  generate(synth::apply_description(d, {{"seed", d.seed + 1}}, "test"), t.path / "c");
-  const auto c = tree(t.path / "c");
+  generate(synth::apply_description(d, {{"seed", d.seed + 1}}, "test"), t.path() / "c");
+  const auto c = tree(t.path() / "c");
   for (const std::string f : {"images/0001.png", "images/0008.png", "sparse/0/images.bin", "sparse/0/points3D.bin"})
     EXPECT_NE(a.at(f), c.at(f)) << f;
 }
@@ -489,8 +476,8 @@ TEST(Synth, CheckedInDescriptionsLoadAndLayerOnTheirBase) {
 TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {
   TempDir t;
   const auto write = [&](const std::string& name, const std::string& text) {
-    std::ofstream(t.path / name) << text;
-    return t.path / name;
+    std::ofstream(t.path() / name) << text;
+    return t.path() / name;
   };
   const auto expect_error = [&](const fs::path& file, const std::vector<std::string>& parts) {
     const std::string msg = error_of([&] { synth::load_description(file); });
@@ -514,23 +501,23 @@ TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {
   const fs::path bad_base = write("bad_base.json", R"({"noise": {"sigma": -1}})");
   const std::string msg = error_of([&] { synth::load_description(write("child.json", R"({"base": "bad_base.json"})")); });
   EXPECT_NE(msg.find(bad_base.string() + ": key 'noise.sigma'"), std::string::npos) << msg;
-  EXPECT_NE(error_of([&] { synth::load_description(t.path / "absent.json"); }).find("absent.json"), std::string::npos);
+  EXPECT_NE(error_of([&] { synth::load_description(t.path() / "absent.json"); }).find("absent.json"), std::string::npos);
 }
 
 TEST(Synth, OutputFolderIsOnlyReplacedWhenAsked) {
   TempDir t;
   const auto d = tiny("tiny_clean.json", {{"points.count", 50}});
-  fs::create_directories(t.path / "other");
-  std::ofstream(t.path / "other" / "keep.txt") << "user file";
-  EXPECT_NE(error_of([&] { generate(d, t.path / "other"); }).find("not empty"), std::string::npos);
+  fs::create_directories(t.path() / "other");
+  std::ofstream(t.path() / "other" / "keep.txt") << "user file";
+  EXPECT_NE(error_of([&] { generate(d, t.path() / "other"); }).find("not empty"), std::string::npos);
 
-  generate(d, t.path / "s");
-  std::ofstream(t.path / "s" / "notes.txt") << "mine";
-  EXPECT_NE(error_of([&] { generate(d, t.path / "s"); }).find("--overwrite"), std::string::npos);
+  generate(d, t.path() / "s");
+  std::ofstream(t.path() / "s" / "notes.txt") << "mine";
+  EXPECT_NE(error_of([&] { generate(d, t.path() / "s"); }).find("--overwrite"), std::string::npos);
   synth::GenerateOptions o;
-  o.out = t.path / "s";
+  o.out = t.path() / "s";
   o.overwrite = true;
   synth::generate_scene(synth::apply_description(d, {{"views.count", 4}}, "test"), o);
-  EXPECT_FALSE(fs::exists(t.path / "s" / "images" / "0005.png")) << "stale views of the earlier scene are removed";
-  EXPECT_TRUE(fs::exists(t.path / "s" / "notes.txt")) << "files the generator did not write are kept";
+  EXPECT_FALSE(fs::exists(t.path() / "s" / "images" / "0005.png")) << "stale views of the earlier scene are removed";
+  EXPECT_TRUE(fs::exists(t.path() / "s" / "notes.txt")) << "files the generator did not write are kept";
 }

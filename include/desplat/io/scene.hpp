@@ -8,7 +8,7 @@
 //   <data_dir>/distractor_masks/<name with its extension replaced by .png>
 //                                  optional ground-truth distractor masks (masks.hpp); a view
 //                                  without such a file (or a scene without the folder) has none
-// The input is only read, never written (it may be read-only, like /work/shared).
+// The input is only read, never written (it may be on a read-only volume).
 //
 // Frames and units:
 //   * World: the normalized frame of docs/METHOD.md §1, x_n = (x − center)·scale, with center =
