@@ -22,8 +22,6 @@ Loss random_loss(std::mt19937& rng, const Camera& cam) {
   return l;
 }
 
-const char* kGroups[] = {"means", "log_scales", "quats", "opacity_logits", "colors"};
-
 // Compares gradients group by group. Float32 accumulates each gradient over every
 // pixel the Gaussian touches (hundreds of terms, each from ~100 flops) and the
 // backward pass reconstructs transmittance by division; the expected relative error
@@ -33,19 +31,19 @@ void expect_gradients_match(const GaussianSet& g, const RasterGradients& got, co
                             double rel_tol, const std::string& label) {
   const std::vector<float> flat = flatten_grads(got);
   ASSERT_EQ(flat.size(), want.size());
-  const size_t sizes[] = {g.means.size(), g.log_scales.size(), g.quats.size(), g.opacity_logits.size(),
-                          g.colors.size()};
   size_t at = 0;
-  for (int grp = 0; grp < 5; ++grp) {
+  for (const ParamGroupInfo& info : kParamGroupTable) {
+    const size_t size = (g.*info.values).size();
+    const char* group = info.name;
     double scale = 0;
-    for (size_t i = at; i < at + sizes[grp]; ++i) scale = std::max(scale, std::abs(want[i]));
-    for (size_t i = at; i < at + sizes[grp]; ++i) {
-      ASSERT_TRUE(std::isfinite(flat[i])) << label << " " << kGroups[grp];
+    for (size_t i = at; i < at + size; ++i) scale = std::max(scale, std::abs(want[i]));
+    for (size_t i = at; i < at + size; ++i) {
+      ASSERT_TRUE(std::isfinite(flat[i])) << label << " " << group;
       EXPECT_NEAR(flat[i], want[i], rel_tol * scale + 1e-5)
-          << label << " " << kGroups[grp] << " element " << (i - at) << " (group max " << scale << ")";
+          << label << " " << group << " element " << (i - at) << " (group max " << scale << ")";
     }
-    EXPECT_GT(scale, 0) << label << " " << kGroups[grp] << ": the scene must exercise this gradient";
-    at += sizes[grp];
+    EXPECT_GT(scale, 0) << label << " " << group << ": the scene must exercise this gradient";
+    at += size;
   }
 }
 
@@ -168,14 +166,11 @@ TEST(Backward, MatchesCentralFiniteDifferences) {
   // float32 round-off in L (~1e-6·Σ|w| ≈ 1e-3 over 2h), so ~1% of the largest gradient.
   constexpr float h = 1e-2f;
   std::vector<double> numeric;
-  for (int grp = 0; grp < 5; ++grp) {
-    std::vector<float>* v[] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors};
-    for (size_t i = 0; i < v[grp]->size(); ++i) {
+  for (const ParamGroupInfo& info : kParamGroupTable) {
+    for (size_t i = 0; i < (g.*info.values).size(); ++i) {
       GaussianSet gp = g, gm = g;
-      std::vector<float>* vp[] = {&gp.means, &gp.log_scales, &gp.quats, &gp.opacity_logits, &gp.colors};
-      std::vector<float>* vm[] = {&gm.means, &gm.log_scales, &gm.quats, &gm.opacity_logits, &gm.colors};
-      (*vp[grp])[i] += h;
-      (*vm[grp])[i] -= h;
+      (gp.*info.values)[i] += h;
+      (gm.*info.values)[i] -= h;
       numeric.push_back((loss_of(gp) - loss_of(gm)) / (2.0 * h));
     }
   }

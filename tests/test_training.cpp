@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <set>
 
 #include "desplat/train/training_checkpoint.hpp"
 #include "support/synthetic_views.hpp"
@@ -171,6 +172,26 @@ TEST(Training, NoPointsInitializesRandomlyInACube) {
   EXPECT_EQ(TrainConfig{}.random_init_points, 50000);
   for (int i = 0; i < 5; ++i) trainer.step();
   trainer.mutable_gaussians().check_consistent();
+}
+
+// Checkpoints written before the parameter-group table existed name their arrays as
+// training_checkpoint.cpp documents; the table must keep producing exactly those names, or
+// older checkpoints would no longer load.
+TEST(Training, CheckpointArrayNamesAreTheDocumentedOnes) {
+  const TrainingData data = synthetic_training_data(8, 64, 48, 5);
+  TrainConfig cfg = short_config(1);
+  cfg.distractors.enabled = true;
+  Trainer trainer(data, cfg);
+  trainer.step();
+  const Checkpoint c = make_training_checkpoint(trainer);
+  std::set<std::string> names;
+  for (const auto& [name, array] : c.arrays) names.insert(name);
+  std::set<std::string> want = {"trainer/view_order", "static/stats/absgrad_sum", "static/stats/visible_count",
+                                "static/stats/max_screen_radius"};
+  for (const char* group : {"means", "log_scales", "quats", "opacity_logits", "colors"})
+    for (const std::string kind : {"", "adam_m/", "adam_v/"}) want.insert("static/" + kind + group);
+  for (const std::string& n : want) EXPECT_TRUE(names.count(n)) << n;
+  for (size_t v = 0; v < data.train.size(); ++v) EXPECT_TRUE(names.count("distractor/" + std::to_string(v) + "/means"));
 }
 
 }  // namespace

@@ -16,27 +16,7 @@ TrainableGaussians::TrainableGaussians(GaussianSet initial) : params(std::move(i
   reset_statistics();
 }
 
-std::vector<float>& TrainableGaussians::param(ParamGroup g) {
-  switch (g) {
-    case ParamGroup::Means: return params.means;
-    case ParamGroup::LogScales: return params.log_scales;
-    case ParamGroup::Quats: return params.quats;
-    case ParamGroup::OpacityLogits: return params.opacity_logits;
-    case ParamGroup::Colors: break;
-  }
-  return params.colors;
-}
-
-int TrainableGaussians::floats_per_gaussian(ParamGroup g) const {
-  switch (g) {
-    case ParamGroup::Means:
-    case ParamGroup::LogScales: return 3;
-    case ParamGroup::Quats: return 4;
-    case ParamGroup::OpacityLogits: return 1;
-    case ParamGroup::Colors: break;
-  }
-  return params.view().color_floats_per_gaussian();
-}
+int TrainableGaussians::floats_per_gaussian(ParamGroup g) const { return group_width(param_group(g), params); }
 
 namespace {
 template <typename T> void keep_rows(std::vector<T>& v, int stride, const std::vector<uint8_t>& keep) {
@@ -67,10 +47,9 @@ void TrainableGaussians::append(const GaussianSet& extra) {
   if (extra.color_mode != params.color_mode || extra.sh_degree != params.sh_degree)
     throw std::logic_error("append: color layout differs");
   for (int g = 0; g < kParamGroups; ++g) {
-    const GaussianSet& e = extra;
-    const std::vector<float>* src[] = {&e.means, &e.log_scales, &e.quats, &e.opacity_logits, &e.colors};
+    const std::vector<float>& src = extra.*kParamGroupTable[g].values;
     std::vector<float>& dst = param(ParamGroup(g));
-    dst.insert(dst.end(), src[g]->begin(), src[g]->end());
+    dst.insert(dst.end(), src.begin(), src.end());
     adam_m[g].resize(dst.size(), 0.0f);
     adam_v[g].resize(dst.size(), 0.0f);
   }
@@ -107,22 +86,21 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
   const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
   const double bc2 = 1.0 - std::pow(double(a.beta2), double(adam_step));
   const float sqrt_bc2 = float(std::sqrt(bc2));
-  const std::vector<float>* g_of[] = {&grads.means, &grads.log_scales, &grads.quats, &grads.opacity_logits,
-                                      &grads.colors};
   for (int g = 0; g < kParamGroups; ++g) {
-    std::vector<float>& p = param(ParamGroup(g));
-    const std::vector<float>& grad = *g_of[g];
+    const ParamGroupInfo& info = kParamGroupTable[g];
+    std::vector<float>& p = param(info.id);
+    const std::vector<float>& grad = grads.*info.grads;
     if (grad.size() != p.size()) throw std::logic_error("adam_update: gradient size differs from parameters");
-    const int stride = floats_per_gaussian(ParamGroup(g));
-    const float base[] = {lr.means, lr.log_scales, lr.quats, lr.opacity_logits, lr.colors_dc};
-    const bool sh_rest = ParamGroup(g) == ParamGroup::Colors && params.color_mode == ColorMode::SphericalHarmonics;
+    const int stride = floats_per_gaussian(info.id);
+    const float base_rate = lr.*info.rate;
+    const bool sh_rest = info.id == ParamGroup::Colors && params.color_mode == ColorMode::SphericalHarmonics;
     float* m = adam_m[g].data();
     float* v = adam_v[g].data();
     const int64_t n = static_cast<int64_t>(p.size());
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < n; ++i) {
       // In SH colors, the first 3 floats of each row are the DC coefficient.
-      const float rate = sh_rest && (i % stride) >= 3 ? lr.colors_rest : base[g];
+      const float rate = sh_rest && (i % stride) >= 3 ? lr.colors_rest : base_rate;
       const float step_size = float(rate / bc1);
       m[i] = a.beta1 * m[i] + (1 - a.beta1) * grad[i];
       v[i] = a.beta2 * v[i] + (1 - a.beta2) * grad[i] * grad[i];
@@ -136,7 +114,7 @@ void TrainableGaussians::check_consistent() const {
   for (int g = 0; g < kParamGroups; ++g) {
     const size_t want = n * floats_per_gaussian(ParamGroup(g));
     if (param(ParamGroup(g)).size() != want || adam_m[g].size() != want || adam_v[g].size() != want)
-      throw std::logic_error("parameter group " + std::to_string(g) + " is out of step with " + std::to_string(n) +
+      throw std::logic_error(std::string("parameter group ") + kParamGroupTable[g].name + " is out of step with " + std::to_string(n) +
                              " Gaussians");
   }
   if (absgrad_sum.size() != n || visible_count.size() != n || max_screen_radius.size() != n)

@@ -239,7 +239,7 @@ int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std
         if (keep[i]) {
           ++bad;
           warn("step " + std::to_string(step_) + ": " + what() + " " + std::to_string(i) +
-               " has a non-finite parameter or optimizer moment (group " + std::to_string(g) + "); pruned");
+               " has a non-finite parameter or optimizer moment (" + kParamGroupTable[g].name + "); pruned");
         }
         keep[i] = 0;
       }

@@ -8,15 +8,13 @@
 namespace desplat {
 namespace {
 
-const char* kGroupNames[kParamGroups] = {"means", "log_scales", "quats", "opacity_logits", "colors"};
-
 std::string distractor_prefix(size_t view) { return "distractor/" + std::to_string(view); }
 
 void put_trainable(Checkpoint& c, const std::string& prefix, const TrainableGaussians& g) {
   const uint64_t n = g.size();
   for (int k = 0; k < kParamGroups; ++k) {
     const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
-    const std::string name = kGroupNames[k];
+    const std::string name = kParamGroupTable[k].name;
     c.put(prefix + "/" + name, {n, stride}, g.param(ParamGroup(k)));
     c.put(prefix + "/adam_m/" + name, {n, stride}, g.adam_m[k]);
     c.put(prefix + "/adam_v/" + name, {n, stride}, g.adam_v[k]);
@@ -31,9 +29,8 @@ GaussianSet get_params(const Checkpoint& c, const std::string& prefix, ColorMode
   g.sh_degree = sh_degree;
   g.color_mode = mode;
   const uint64_t n = c.array(prefix + "/opacity_logits").shape().at(0);
-  const uint64_t strides[kParamGroups] = {3, 3, 4, 1, uint64_t(g.view().color_floats_per_gaussian())};
-  std::vector<float>* dst[kParamGroups] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors};
-  for (int k = 0; k < kParamGroups; ++k) *dst[k] = c.get<float>(prefix + "/" + kGroupNames[k], {n, strides[k]});
+  for (const ParamGroupInfo& info : kParamGroupTable)
+    g.*info.values = c.get<float>(prefix + "/" + info.name, {n, uint64_t(group_width(info, g))});
   return g;
 }
 
@@ -42,8 +39,8 @@ void get_trainable(const Checkpoint& c, const std::string& prefix, TrainableGaus
   const uint64_t n = g.size();
   for (int k = 0; k < kParamGroups; ++k) {
     const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
-    g.adam_m[k] = c.get<float>(prefix + "/adam_m/" + kGroupNames[k], {n, stride});
-    g.adam_v[k] = c.get<float>(prefix + "/adam_v/" + kGroupNames[k], {n, stride});
+    g.adam_m[k] = c.get<float>(prefix + "/adam_m/" + kParamGroupTable[k].name, {n, stride});
+    g.adam_v[k] = c.get<float>(prefix + "/adam_v/" + kParamGroupTable[k].name, {n, stride});
   }
   g.absgrad_sum = c.get<float>(prefix + "/stats/absgrad_sum", {n});
   g.visible_count = c.get<int32_t>(prefix + "/stats/visible_count", {n});

@@ -6,22 +6,21 @@
 
 #include <vector>
 
+#include "desplat/train/param_groups.hpp"
 #include "support/reference_render.hpp"
 
 namespace desplat::test {
 
-// Parameters flattened group by group: means, log_scales, quats, opacity_logits, colors.
+// Parameters flattened group by group, in the parameter-group table's order.
 inline std::vector<float> flatten_params(const GaussianSet& g) {
   std::vector<float> p;
-  for (const auto* v : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.colors})
-    p.insert(p.end(), v->begin(), v->end());
+  for (const ParamGroupInfo& info : kParamGroupTable) p.insert(p.end(), (g.*info.values).begin(), (g.*info.values).end());
   return p;
 }
 
 inline std::vector<float> flatten_grads(const RasterGradients& gr) {
   std::vector<float> p;
-  for (const auto* v : {&gr.means, &gr.log_scales, &gr.quats, &gr.opacity_logits, &gr.colors})
-    p.insert(p.end(), v->begin(), v->end());
+  for (const ParamGroupInfo& info : kParamGroupTable) p.insert(p.end(), (gr.*info.grads).begin(), (gr.*info.grads).end());
   return p;
 }
 
@@ -50,12 +49,10 @@ inline std::vector<double> jet_gradient(const GaussianSet& g, const Camera& cam,
     r.color_mode = g.color_mode;
     r.sh_degree = g.sh_degree;
     size_t at = 0;
-    using Slot = std::pair<std::vector<J>*, const std::vector<float>*>;
-    for (auto [dst, src] : {Slot{&r.means, &g.means}, Slot{&r.log_scales, &g.log_scales},
-                            Slot{&r.quats, &g.quats}, Slot{&r.opacity_logits, &g.opacity_logits},
-                            Slot{&r.colors, &g.colors}}) {
-      dst->assign(values.begin() + at, values.begin() + at + src->size());
-      at += src->size();
+    for (const ParamGroupInfo& info : kParamGroupTable) {
+      const size_t n = (g.*info.values).size();
+      r.array(info.id).assign(values.begin() + at, values.begin() + at + n);
+      at += n;
     }
     const J L = weighted_loss(reference_render<J>(r, cam, s), wC, wA, wD);
     for (int k = 0; k < kChunk && start + k < flat.size(); ++k) grad[start + k] = L.v[k];

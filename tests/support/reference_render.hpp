@@ -13,6 +13,7 @@
 #include "desplat/core/camera.hpp"
 #include "desplat/core/gaussians.hpp"
 #include "desplat/raster/raster.hpp"
+#include "desplat/train/param_groups.hpp"
 #include "raster/stage_math.hpp"
 
 namespace desplat::test {
@@ -22,6 +23,11 @@ template <typename T> struct RefGaussians {
   ColorMode color_mode = ColorMode::SphericalHarmonics;
   int sh_degree = 0;
   size_t size() const { return opacity_logits.size(); }
+  // The array of a parameter group (the table's order, desplat/train/param_groups.hpp).
+  std::vector<T>& array(ParamGroup g) {
+    std::vector<T>* arrays[kParamGroups] = {&means, &log_scales, &quats, &opacity_logits, &colors};
+    return *arrays[static_cast<int>(g)];
+  }
 };
 
 template <typename T> RefGaussians<T> to_ref(const GaussianSet& g) {

@@ -10,22 +10,13 @@
 
 #include "desplat/core/gaussians.hpp"
 #include "desplat/raster/raster.hpp"
+#include "desplat/train/param_groups.hpp"
 
 namespace desplat {
-
-enum class ParamGroup { Means = 0, LogScales, Quats, OpacityLogits, Colors };
-constexpr int kParamGroups = 5;
 
 // Adam hyper-parameters (docs/METHOD.md §6).
 struct AdamSettings {
   float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
-};
-
-// Learning rate per group; for Colors in SH mode the DC coefficient uses `colors_dc`
-// and the higher bands `colors_rest` (in RGB mode `colors_dc` applies to all three).
-struct LearningRates {
-  float means = 1.6e-4f, log_scales = 5e-3f, quats = 1e-3f, opacity_logits = 5e-2f;
-  float colors_dc = 2.5e-3f, colors_rest = 1.25e-4f;
 };
 
 struct TrainableGaussians {
@@ -40,8 +31,8 @@ struct TrainableGaussians {
 
   explicit TrainableGaussians(GaussianSet initial = {});
   size_t size() const { return params.size(); }
-  std::vector<float>& param(ParamGroup g);
-  const std::vector<float>& param(ParamGroup g) const { return const_cast<TrainableGaussians&>(*this).param(g); }
+  std::vector<float>& param(ParamGroup g) { return params.*param_group(g).values; }
+  const std::vector<float>& param(ParamGroup g) const { return params.*param_group(g).values; }
   int floats_per_gaussian(ParamGroup g) const;
 
   // Keeps the rows where keep[i] != 0, in order, in every array.
