@@ -5,7 +5,6 @@
 #include "desplat/train/trainer.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -17,9 +16,6 @@
 
 namespace desplat {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, std::mt19937_64& rng) {
   if (!data.points.empty()) return init_gaussians_from_points(data.points, data.colors, cfg.sh_degree, rng());
@@ -132,77 +128,76 @@ StepStats Trainer::step() {
   TrainableGaussians* distractors = nullptr;
   if (config_.distractors.enabled && distractors_[view].size() > 0) distractors = &distractors_[view];
   stats.view_distractors = distractors ? distractors->size() : 0;
+  StepProfiler profile;
 
-  auto t0 = Clock::now();
-  rasterize_forward(gaussians_.params.view(), cam, rs, forward_);
-  stats.timings.forward = seconds_since(t0);
-  if (distractors) {
-    t0 = Clock::now();
-    rasterize_forward(distractors->params.view(), cam, rs, distractor_forward_);
-    stats.timings.distractor += seconds_since(t0);
-  }
+  // 1. Render each layer.
+  profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs); });
+  if (distractors)
+    profile.time(&StepTimings::distractor, [&] { distractor_pass_.render(*distractors, cam, rs); });
 
-  t0 = Clock::now();
-  const Layer static_layer{forward_.color, forward_.alpha};
-  const Layer distractor_layer =
-      distractors ? Layer{distractor_forward_.color, distractor_forward_.alpha} : Layer{};
-  composite_.resize(3 * pixels);
-  composite_layers(static_layer, distractor_layer, bg, composite_);
-  d_composite_.resize(3 * pixels);
-  const PhotometricLoss loss =
-      photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_);
-  d_color_.resize(3 * pixels);
-  d_alpha_.resize(pixels);
-  d_distractor_color_.resize(distractors ? 3 * pixels : 0);
-  d_distractor_alpha_.resize(distractors ? pixels : 0);
-  composite_layers_backward(static_layer, distractor_layer, bg, d_composite_,
-                            {d_color_, d_alpha_, d_distractor_color_, d_distractor_alpha_});
-  stats.loss = loss.loss;
-  if (config_.distractors.enabled && config_.distractors.regularize)
-    stats.loss += alpha_regularizers(static_layer, distractor_layer, config_.distractors.lambda_static,
-                                     config_.distractors.lambda_distractor, d_alpha_, d_distractor_alpha_);
-  stats.psnr = psnr(composite_, target.pixels);
-  stats.timings.loss = seconds_since(t0);
+  // 2. Composite, loss, and the loss's gradient with respect to each layer (docs/METHOD.md §4).
+  profile.time(&StepTimings::loss, [&] {
+    const Layer statics = static_pass_.layer();
+    const Layer distractor = distractors ? distractor_pass_.layer() : Layer{};
+    composite_.resize(3 * pixels);
+    composite_layers(statics, distractor, bg, composite_);
+    d_composite_.resize(3 * pixels);
+    const PhotometricLoss loss =
+        photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_);
+    static_pass_.d_color.resize(3 * pixels);
+    static_pass_.d_alpha.resize(pixels);
+    distractor_pass_.d_color.resize(distractors ? 3 * pixels : 0);
+    distractor_pass_.d_alpha.resize(distractors ? pixels : 0);
+    composite_layers_backward(statics, distractor, bg, d_composite_,
+                              {static_pass_.d_color, static_pass_.d_alpha, distractor_pass_.d_color,
+                               distractor_pass_.d_alpha});
+    stats.loss = loss.loss;
+    if (config_.distractors.enabled && config_.distractors.regularize)
+      stats.loss += alpha_regularizers(statics, distractor, config_.distractors.lambda_static,
+                                       config_.distractors.lambda_distractor, static_pass_.d_alpha,
+                                       distractor_pass_.d_alpha);
+    stats.psnr = psnr(composite_, target.pixels);
+  });
 
-  t0 = Clock::now();
-  rasterize_backward(gaussians_.params.view(), cam, rs, forward_, d_color_, d_alpha_, {}, grads_);
-  stats.timings.backward = seconds_since(t0);
-  if (distractors) {
-    t0 = Clock::now();
-    rasterize_backward(distractors->params.view(), cam, rs, distractor_forward_, d_distractor_color_,
-                       d_distractor_alpha_, {}, distractor_grads_);
-    stats.timings.distractor += seconds_since(t0);
-  }
+  // 3. Backward through each layer's rasterization.
+  profile.time(&StepTimings::backward, [&] { static_pass_.backward(gaussians_, cam, rs); });
+  if (distractors)
+    profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
 
-  t0 = Clock::now();
-  if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(forward_, grads_);
-  LearningRates lr = config_.lr;
-  // Exponential decay of the means' rate from lr.means to means_lr_final.
-  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
-  lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
-  const double decay = double(lr.means) / double(config_.lr.means);  // the distractors' means follow it
-  gaussians_.adam_update(grads_, lr, AdamSettings{});
-  stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
+  // 4. Statistics, Adam and density control: the static buffer …
   const int image_size = std::max(cam.width, cam.height);
-  stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
-                                  static_cast<int>(data_.train.size()), rng_);
-  stats.timings.optimizer = seconds_since(t0);
+  // Exponential decay of the means' rate from lr.means to means_lr_final; the distractors'
+  // means follow the same factor.
+  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
+  LearningRates lr = config_.lr;
+  lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
+  const double decay = double(lr.means) / double(config_.lr.means);
+  profile.time(&StepTimings::optimizer, [&] {
+    if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads);
+    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{});
+    stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
+    stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
+                                    static_cast<int>(data_.train.size()), rng_);
+  });
 
+  // … and the view's distractor buffer (its statistics are kept after densification stops:
+  // culling unseen distractors needs them), then every view's refinement when it is due.
   const bool refine_distractors_now =
       distractor_refine_due(step_, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
   if (distractors || refine_distractors_now) {
-    t0 = Clock::now();
-    if (distractors) {
-      // Distractor statistics are kept after densification stops: culling unseen ones needs them.
-      distractors->accumulate_statistics(distractor_forward_, distractor_grads_);
-      LearningRates dlr = config_.distractors.lr;
-      dlr.means = float(dlr.means * decay);
-      distractors->adam_update(distractor_grads_, dlr, AdamSettings{});
-      stats.nonfinite_pruned += prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
-    }
-    if (refine_distractors_now) stats.distractor_refine = refine_all_distractors(image_size);
-    stats.timings.distractor += seconds_since(t0);
+    profile.time(&StepTimings::distractor, [&] {
+      if (distractors) {
+        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads);
+        LearningRates dlr = config_.distractors.lr;
+        dlr.means = float(dlr.means * decay);
+        distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{});
+        stats.nonfinite_pruned +=
+            prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
+      }
+      if (refine_distractors_now) stats.distractor_refine = refine_all_distractors(image_size);
+    });
   }
+  stats.timings = profile.timings;
   stats.gaussians = gaussians_.size();
   ++step_;
   return stats;

@@ -20,6 +20,7 @@
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
 #include "desplat/core/image.hpp"
+#include "desplat/core/stopwatch.hpp"
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/trainable.hpp"
 #include "desplat/core/world_frame.hpp"
@@ -74,6 +75,35 @@ struct TrainConfig {
 struct StepTimings {
   double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0;
   double total() const { return forward + backward + loss + optimizer + distractor; }
+};
+
+// The timing blocks of one step, in one place: each block's wall time goes to one field of
+// StepTimings (what metrics.json reports).
+class StepProfiler {
+ public:
+  template <class Fn> void time(double StepTimings::*block, Fn&& fn) {
+    const Stopwatch watch;
+    fn();
+    timings.*block += watch.seconds();
+  }
+  StepTimings timings;
+};
+
+// One layer's share of a step (the static layer, or the view's distractor layer): its render,
+// the gradient of the loss with respect to that render, and the resulting parameter gradients.
+// Scratch reused every step; owned by the Trainer.
+struct LayerPass {
+  RasterOutput forward;
+  std::vector<float> d_color, d_alpha;  // [P·3], [P] ∂L/∂(premultiplied colour, alpha)
+  RasterGradients grads;
+
+  void render(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs) {
+    rasterize_forward(g.params.view(), camera, rs, forward);
+  }
+  Layer layer() const { return {forward.color, forward.alpha}; }
+  void backward(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs) {
+    rasterize_backward(g.params.view(), camera, rs, forward, d_color, d_alpha, {}, grads);
+  }
 };
 
 struct StepStats {
@@ -137,9 +167,8 @@ class Trainer {
   // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
   std::vector<std::vector<FloatImage>> downscaled_;
   // Scratch reused every step.
-  RasterOutput forward_, distractor_forward_;
-  RasterGradients grads_, distractor_grads_;
-  std::vector<float> composite_, d_composite_, d_color_, d_alpha_, d_distractor_color_, d_distractor_alpha_;
+  LayerPass static_pass_, distractor_pass_;
+  std::vector<float> composite_, d_composite_;
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
