@@ -7,6 +7,7 @@
 
 #include "desplat/synth/occluders.hpp"
 #include "desplat/io/splits.hpp"
+#include "split_options.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -26,13 +27,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--overwrite", o.overwrite, "replace a scene already written to --out");
   std::string split_rule = "every-nth";
-  app.add_option("--split", split_rule, "train/test split: every-nth, all-train, lists, robustnerf, onthego, phototourism")
-      ->capture_default_str();
-  app.add_option("--test-every", o.split.every_nth, "every-nth split: hold out every Nth image")->capture_default_str();
-  app.add_option("--train-list", o.split.train_list, "lists split: file with one training image name per line");
-  app.add_option("--test-list", o.split.test_list, "lists split: file with one test image name per line");
-  app.add_option("--clutter-ratio", o.split.clutter_ratio, "robustnerf split: share of cluttered training views (0..1)");
-  app.add_option("--tsv", o.split.tsv, "phototourism split: the .tsv split file");
+  desplat::apps::add_split_options(app, o.split, split_rule);
   try {
     app.parse(argc, argv);
   } catch (const CLI::Success& e) {  // --help

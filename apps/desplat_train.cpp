@@ -5,6 +5,7 @@
 #include <cstdio>
 
 #include "desplat/jobs/training_run.hpp"
+#include "split_options.hpp"
 #include "stop_signal.hpp"
 
 int main(int argc, char** argv) {
@@ -38,13 +39,7 @@ int main(int argc, char** argv) {
   app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
       ->check(CLI::PositiveNumber)->capture_default_str();
   std::string split_rule = "every-nth";
-  app.add_option("--split", split_rule, "train/test split: every-nth, all-train, lists, robustnerf, onthego, phototourism")
-      ->capture_default_str();
-  app.add_option("--test-every", o.split.every_nth, "every-nth split: hold out every Nth image")->capture_default_str();
-  app.add_option("--train-list", o.split.train_list, "lists split: file with one training image name per line");
-  app.add_option("--test-list", o.split.test_list, "lists split: file with one test image name per line");
-  app.add_option("--clutter-ratio", o.split.clutter_ratio, "robustnerf split: share of cluttered training views (0..1)");
-  app.add_option("--tsv", o.split.tsv, "phototourism split: the .tsv split file");
+  desplat::apps::add_split_options(app, o.split, split_rule);
   app.add_option("--eval-every", o.eval_every, "evaluate test views every N steps (0: only at the end)")
       ->capture_default_str();
   app.add_option("--checkpoint-every", o.checkpoint_every, "write a checkpoint every N steps (0: only at the end)")

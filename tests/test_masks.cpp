@@ -18,6 +18,7 @@
 #include "desplat/io/scene.hpp"
 #include "desplat/io/undistort.hpp"
 #include "support/expect.hpp"
+#include "support/look_at.hpp"
 #include "support/temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -75,20 +76,7 @@ colmap::Model distorted_model() {
   for (int i = 0; i < 3; ++i) {
     const double a = 0.4 * i;
     const Eigen::Vector3d C(3 * std::sin(a), 0.1 * i, -3 * std::cos(a));
-    const Eigen::Vector3d f = -C.normalized();
-    const Eigen::Vector3d r = Eigen::Vector3d(0, 1, 0).cross(f).normalized();
-    Eigen::Matrix3d R;
-    R.row(0) = r;
-    R.row(1) = f.cross(r);
-    R.row(2) = f;
-    const Eigen::Quaterniond q(R);
-    const Eigen::Vector3d t = -R * C;
-    colmap::Image im;
-    im.id = uint32_t(i + 1);
-    im.qvec_wxyz = {q.w(), q.x(), q.y(), q.z()};
-    im.tvec = {t.x(), t.y(), t.z()};
-    im.camera_id = 1;
-    im.name = "view_" + std::to_string(i) + ".png";
+    const colmap::Image im = desplat::testing::look_at_origin(C, uint32_t(i + 1), "view_" + std::to_string(i) + ".png");
     m.images[im.id] = im;
   }
   colmap::Point3D p;

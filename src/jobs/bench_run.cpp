@@ -1,5 +1,7 @@
 #include "desplat/jobs/bench_run.hpp"
 
+#include "desplat/core/stopwatch.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -166,7 +168,6 @@ std::vector<BenchPoint> read_bench_csv(const fs::path& path) {
 std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir, bool resume,
                                   const std::atomic<bool>& stop_requested,
                                   const std::function<void(const BenchPoint&)>& report) {
-  using Clock = std::chrono::steady_clock;
   fs::create_directories(out_dir);
   const fs::path csv = out_dir / "bench.csv";
   std::vector<BenchPoint> points;
@@ -199,9 +200,9 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
       double seconds = 0;
       while (trainer.current_step() < config.iterations) {
         if (stop_requested.load()) return points;
-        const auto t0 = Clock::now();
+        const Stopwatch watch;
         trainer.step();
-        seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+        seconds += watch.seconds();
         const int64_t step = trainer.current_step();
         if (step % grid.eval_every != 0 && step != config.iterations) continue;
         const std::vector<ViewMetrics> m = trainer.evaluate(test_views);

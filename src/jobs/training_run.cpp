@@ -1,6 +1,7 @@
 // desplat_train's job: scene → trainer → progress, evaluation, checkpoints, outputs.
 #include "desplat/jobs/training_run.hpp"
 
+#include "desplat/core/stopwatch.hpp"
 #include "desplat/jobs/model_folder.hpp"
 
 #include <sys/resource.h>
@@ -249,7 +250,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                      [](const SceneView& v) { return !v.mask_path.empty(); });
   std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
   Progress progress(config.iterations, opt.log_every);
-  const auto start = Clock::now();
+  const Stopwatch run_clock;
   const int64_t first = trainer.current_step();
   while (trainer.current_step() < config.iterations) {
     if (stop_requested.load()) {
@@ -266,13 +267,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
       dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
     }
-    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
     const int64_t done = trainer.current_step();
     if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       json point = {{"step", done},
-                    {"wall_seconds", std::chrono::duration<double>(Clock::now() - start).count()},
+                    {"wall_seconds", run_clock.seconds()},
                     {"mean_psnr", m["mean_psnr"]},
                     {"mean_ssim", m["mean_ssim"]},
                     {"gaussians", trainer.gaussians().size()},
@@ -282,7 +283,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     }
     if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
   }
-  const double wall = std::chrono::duration<double>(Clock::now() - start).count();
+  const double wall = run_clock.seconds();
   save();
 
   // Final evaluation and outputs.

@@ -7,6 +7,8 @@
 #include <fstream>
 
 #include "desplat/synth/synth.hpp"
+
+#include "desplat/core/stopwatch.hpp"
 #include "synth/camera_path.hpp"
 #include "synth/distractors.hpp"
 #include "synth/photo_effects.hpp"
@@ -17,9 +19,7 @@ namespace desplat::synth {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // What an earlier run wrote; --overwrite removes exactly these.
 const std::vector<std::string> kOutputs{"images",        "clean",          "distractor_masks", "sparse",
@@ -86,7 +86,7 @@ std::string view_name(int k, int count) {
 bool is_test_view(int k) { return k % 8 == 0; }  // splits.hpp EveryNth with 8, names sorted = k order
 
 GenerationReport generate_scene(const Description& d, const GenerateOptions& o) {
-  const auto t0 = Clock::now();
+  const Stopwatch t0;
   const auto progress = [&](const std::string& line) {
     if (o.on_progress) o.on_progress(line);
   };
@@ -115,7 +115,7 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
   GenerationReport report;
   const bool exposure_on = d.exposure.stops > 0 || d.exposure.white_balance > 0;
   const bool noise_on = d.noise.sigma > 0 || d.noise.shot > 0;
-  const auto t_render = Clock::now();
+  const Stopwatch t_render;
   const SampleGrid grid = make_sample_grid(lens, d.supersampling, d.seed);
   std::string train_list, test_list;
   for (int k = 0; k < n; ++k) {
@@ -140,12 +140,12 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
       report.noise_pixels += pixels;
     }
     const FloatImage& photo = changed.pixels.empty() ? r.clean : changed;
-    const auto t_write = Clock::now();
+    const Stopwatch t_write;
     std::vector<std::pair<fs::path, const FloatImage*>> files{{o.out / "clean" / name, &r.clean},
                                                               {o.out / "images" / name, &photo}};
     if (!test) files.emplace_back(o.out / "distractor_masks" / name, &r.mask);
     write_pngs(files);
-    report.write_seconds += seconds_since(t_write);
+    report.write_seconds += t_write.seconds();
     if (cluttered[static_cast<size_t>(k)]) {
       if (std::none_of(r.mask.pixels.begin(), r.mask.pixels.end(), [](float m) { return m > 0; }))
         throw SynthError("view " + name + ": its distractors cover no pixel (hidden by static geometry); "
@@ -156,25 +156,25 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
     (test ? report.num_test : report.num_train) += 1;
     progress("rendered " + name + " (" + std::to_string(k + 1) + "/" + std::to_string(n) + ")");
   }
-  report.render_seconds = seconds_since(t_render) - report.write_seconds;
+  report.render_seconds = t_render.seconds() - report.write_seconds;
   write_text(o.out / "train_list.txt", train_list);
   write_text(o.out / "test_list.txt", test_list);
 
-  const auto t_points = Clock::now();
+  const Stopwatch t_points;
   colmap::Model model;
   model.cameras[1] = lens;
   for (int k = 0; k < n; ++k) model.images[static_cast<uint32_t>(k + 1)] = colmap_image(k, n, poses[static_cast<size_t>(k)]);
   add_sparse_points({&scene.objects, &distractors, &poses, lens, d.points, d.seed}, model);
   report.num_points = model.points.size();
   for (const auto& [id, p] : model.points) report.num_observations += p.track.size();
-  report.points_seconds = seconds_since(t_points);
+  report.points_seconds = t_points.seconds();
   progress("sampled " + std::to_string(report.num_points) + " points");
   try {
     colmap::write_model_binary(model, o.out / "sparse" / "0");
   } catch (const colmap::ColmapError& e) {
     throw SynthError(e.what());
   }
-  report.seconds = seconds_since(t0);
+  report.seconds = t0.seconds();
   return report;
 }
 

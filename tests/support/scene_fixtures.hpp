@@ -19,6 +19,7 @@
 #include "desplat/io/scene.hpp"
 #include "desplat/io/undistort.hpp"
 #include "support/expect.hpp"
+#include "support/look_at.hpp"
 #include "support/fox_scene.hpp"
 #include "support/temp_dir.hpp"
 
@@ -123,20 +124,7 @@ inline Synthetic synthetic_model(CameraModelId lens, int n, int w, int h, int po
   for (int i = 0; i < n; ++i) {
     const double a = 2 * M_PI * i / n;
     const Eigen::Vector3d C(3 * std::cos(a), 0.3 * i / n, 3 * std::sin(a));
-    const Eigen::Vector3d f = -C.normalized();
-    const Eigen::Vector3d r = Eigen::Vector3d(0, 1, 0).cross(f).normalized();
-    Eigen::Matrix3d R;
-    R.row(0) = r;
-    R.row(1) = f.cross(r);
-    R.row(2) = f;
-    const Eigen::Quaterniond q(R);
-    const Eigen::Vector3d t = -R * C;
-    colmap::Image im;
-    im.id = uint32_t(i + 1);
-    im.qvec_wxyz = {q.w(), q.x(), q.y(), q.z()};
-    im.tvec = {t.x(), t.y(), t.z()};
-    im.camera_id = 1;
-    im.name = "img_" + std::to_string(i) + ".png";
+    const colmap::Image im = desplat::testing::look_at_origin(C, uint32_t(i + 1), "img_" + std::to_string(i) + ".png");
     s.names.push_back(im.name);
     s.model.images[im.id] = im;
   }
