@@ -1,6 +1,6 @@
 // desplat_bench: trains a grid of settings on one or more scenes and plots test accuracy
 // (PSNR, SSIM, mask IoU) against training wall time, and against clutter ratio. The grid
-// format and the outputs are described in include/desplat/bench_run.hpp.
+// format and the outputs are described in include/desplat/jobs/bench_run.hpp.
 #include <CLI/CLI.hpp>
 
 #include <cstdio>

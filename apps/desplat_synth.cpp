@@ -1,5 +1,5 @@
 // desplat_synth: writes a synthetic capture with known ground truth from a scene description
-// (include/desplat/synth.hpp; descriptions in data/synthetic/).
+// (include/desplat/synth/synth.hpp; descriptions in data/synthetic/).
 #include <CLI/CLI.hpp>
 
 #include <cstdio>

@@ -1,4 +1,4 @@
-// Atomic file replacement (see include/desplat/atomic_file.hpp for the protocol).
+// Atomic file replacement (see include/desplat/io/atomic_file.hpp for the protocol).
 #include "desplat/io/atomic_file.hpp"
 
 #include <fcntl.h>

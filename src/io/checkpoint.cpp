@@ -1,4 +1,4 @@
-// Checkpoint container (see include/desplat/checkpoint.hpp for the file format) and the
+// Checkpoint container (see include/desplat/io/checkpoint.hpp for the file format) and the
 // CRC-32 it uses (src/io/crc32.hpp).
 #include "desplat/io/checkpoint.hpp"
 

@@ -1,5 +1,5 @@
 // Ground-truth distractor masks: reading them for a scene's views and scoring predicted masks.
-// See include/desplat/masks.hpp for the conventions implemented here. desplat_occlude's
+// See include/desplat/io/masks.hpp for the conventions implemented here. desplat_occlude's
 // occluder pasting lives in occluders.cpp.
 #include "desplat/io/masks.hpp"
 

@@ -1,4 +1,4 @@
-// Standard 3DGS PLY export and import (see include/desplat/ply.hpp for the format).
+// Standard 3DGS PLY export and import (see include/desplat/io/ply.hpp for the format).
 //
 // Both directions share one table of columns (property name → place in a
 // GaussianSet), so the written order and the read mapping cannot drift apart. The

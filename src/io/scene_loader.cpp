@@ -1,4 +1,4 @@
-// COLMAP capture -> Scene (see include/desplat/scene.hpp for the rules this implements).
+// COLMAP capture -> Scene (see include/desplat/io/scene.hpp for the rules this implements).
 #include "desplat/io/scene.hpp"
 
 #include <OpenImageIO/imageio.h>

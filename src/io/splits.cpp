@@ -1,4 +1,4 @@
-// Train/test split rules; see include/desplat/splits.hpp for each rule's definition.
+// Train/test split rules; see include/desplat/io/splits.hpp for each rule's definition.
 #include "desplat/io/splits.hpp"
 
 #include <algorithm>

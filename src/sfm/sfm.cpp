@@ -1,4 +1,4 @@
-// Structure from motion by running the colmap executable; see include/desplat/sfm.hpp.
+// Structure from motion by running the colmap executable; see include/desplat/sfm/sfm.hpp.
 #include "desplat/sfm/sfm.hpp"
 
 #include <OpenImageIO/imageio.h>

@@ -1,6 +1,6 @@
 // desplat_occlude's job: pasting occluders (shapes and patches of other photos) into training
 // views of a capture and writing the result as a scene with ground-truth distractor masks.
-// See include/desplat/occluders.hpp for what is written; the mask layout is masks.hpp's.
+// See include/desplat/synth/occluders.hpp for what is written; the mask layout is masks.hpp's.
 #include "desplat/synth/occluders.hpp"
 
 #include <algorithm>
