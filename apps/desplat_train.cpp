@@ -5,6 +5,7 @@
 #include <cstdio>
 
 #include "desplat/jobs/training_run.hpp"
+#include "desplat/train/presets.hpp"
 #include "split_options.hpp"
 #include "stop_signal.hpp"
 
@@ -23,6 +24,10 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out_dir, "output folder")->required();
   app.add_option("--config", o.config_file, "JSON file overriding training settings (see config.json of any run)")
       ->check(CLI::ExistingFile);
+  app.add_option("--preset", o.preset,
+                 "starting settings: default (what measures best) or paper (the authors' exact behaviour); "
+                 "--config applies on top")
+      ->check(CLI::IsMember(desplat::preset_names()));
   app.add_option("--iterations", o.iterations, "training steps (default 30000)")->check(CLI::PositiveNumber);
   app.add_option("--seed", o.seed, "random seed (default 0)");
   app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(CLI::NonNegativeNumber);

@@ -126,13 +126,13 @@ TEST(Distractors, RefineCullsUnseenAndDensifiesOnlyBefore15000) {
   DensifySettings d;
   std::mt19937_64 rng(1);
   TrainableGaussians before = make();
-  const RefineReport r = refine_distractors(before, d, 5000, 100, rng);
+  const RefineReport r = refine_distractors(before, d, DistractorSettings{}, 5000, 100, rng);
   EXPECT_EQ(r.split, 1);
   EXPECT_EQ(r.culled, 2);              // unseen + transparent
   EXPECT_EQ(before.size(), 1u + 2u);   // the kept one + 2 split samples
   EXPECT_FALSE(r.opacity_reset);
   TrainableGaussians after = make();
-  const RefineReport r2 = refine_distractors(after, d, 16000, 100, rng);
+  const RefineReport r2 = refine_distractors(after, d, DistractorSettings{}, 16000, 100, rng);
   EXPECT_EQ(r2.split + r2.duplicated, 0);
   EXPECT_EQ(r2.culled, 2);
   EXPECT_EQ(after.size(), 2u);

@@ -187,7 +187,8 @@ TEST(Training, CheckpointArrayNamesAreTheDocumentedOnes) {
   std::set<std::string> names;
   for (const auto& [name, array] : c.arrays) names.insert(name);
   std::set<std::string> want = {"trainer/view_order", "static/stats/absgrad_sum", "static/stats/visible_count",
-                                "static/stats/max_screen_radius"};
+                                "static/stats/max_screen_radius", "trainer/view_static_unexplained",
+                                "trainer/view_composite_unexplained", "trainer/view_starved"};
   for (const char* group : {"means", "log_scales", "quats", "opacity_logits", "colors"})
     for (const std::string kind : {"", "adam_m/", "adam_v/"}) want.insert("static/" + kind + group);
   for (const std::string& n : want) EXPECT_TRUE(names.count(n)) << n;

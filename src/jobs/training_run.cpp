@@ -19,6 +19,7 @@
 #include "desplat/eval/mask_metrics.hpp"
 #include "desplat/io/ply.hpp"
 #include "desplat/sfm/sfm.hpp"
+#include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/train/training_checkpoint.hpp"
 
@@ -157,6 +158,32 @@ TrainingData load_training_data(const Scene& scene) {
   return data;
 }
 
+// One distractor refinement for the history: per view, the buffer before and after, the
+// growth budget, the high-gradient candidates, splits, duplicates, culls and the
+// distribution of mean gradient / threshold (docs/METHOD.md §7).
+json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
+  json views = json::array();
+  for (const ViewRefinement& r : s.distractor_refinements)
+    views.push_back({{"view", trainer.data().train[r.view].name},
+                     {"before", r.before},
+                     {"after", r.after},
+                     {"budget", r.budget == kUnlimitedGrowth ? json(nullptr) : json(r.budget)},
+                     {"high_gradient", r.report.high_gradient},
+                     {"split", r.report.split},
+                     {"duplicated", r.report.duplicated},
+                     {"culled", r.report.culled},
+                     {"held_back", r.report.held_back},
+                     {"gradient_ratio_bins", r.report.gradient_ratio_bins},
+                     {"static_unexplained", trainer.view_static_unexplained[r.view]},
+                     {"composite_unexplained", trainer.view_composite_unexplained[r.view]}});
+  return {{"kind", "distractor_refinement"},
+          {"step", s.step},
+          {"gradient_ratio_bin_edges", {0.5, 1, 2, 4}},
+          {"static_gaussians", s.gaussians},
+          {"distractor_gaussians", trainer.distractor_count()},
+          {"views", views}};
+}
+
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
   fs::create_directories(opt.out_dir);
   fs::path data_dir = opt.data_dir;
@@ -172,7 +199,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     data_dir = sfm_options.out;
   }
 
-  TrainConfig config;
+  TrainConfig config = preset_config(opt.preset);
   if (!opt.config_file.empty()) {
     std::ifstream f(opt.config_file);
     if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
@@ -234,7 +261,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
                 (long long)full_resolution_from, (long long)config.iterations);
 
-  const json run_json = {{"static_only", opt.static_only}};
+  const json run_json = {{"static_only", opt.static_only}, {"preset", opt.preset}};
   model.write_config({config, recipe, run_json});
 
   Trainer trainer(data, config);
@@ -261,6 +288,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       return 130;
     }
     const StepStats s = trainer.step();
+    if (!s.distractor_refinements.empty()) history.push_back(distractor_refinement_json(s, trainer));
     if (config.downscale_at(s.step) == 1) {
       t_fwd.push_back(s.timings.forward), t_bwd.push_back(s.timings.backward);
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
@@ -272,7 +300,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     const int64_t done = trainer.current_step();
     if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
-      json point = {{"step", done},
+      json point = {{"kind", "evaluation"},
+                    {"step", done},
                     {"wall_seconds", run_clock.seconds()},
                     {"mean_psnr", m["mean_psnr"]},
                     {"mean_ssim", m["mean_ssim"]},

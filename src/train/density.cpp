@@ -8,9 +8,10 @@
 namespace desplat {
 namespace {
 
-float max_scale(const GaussianSet& g, size_t i) {
-  return std::exp(std::max({g.log_scales[3 * i], g.log_scales[3 * i + 1], g.log_scales[3 * i + 2]}));
+float max_log_scale(const GaussianSet& g, size_t i) {
+  return std::max({g.log_scales[3 * i], g.log_scales[3 * i + 1], g.log_scales[3 * i + 2]});
 }
+float max_scale(const GaussianSet& g, size_t i) { return std::exp(max_log_scale(g, i)); }
 float logit(float p) { return std::log(p / (1 - p)); }
 
 template <typename T> void append_row(std::vector<T>& dst, const std::vector<T>& src, size_t i, int stride) {
@@ -87,8 +88,27 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
   return report;
 }
 
+RefineReport& RefineReport::operator+=(const RefineReport& r) {
+  split += r.split, duplicated += r.duplicated, culled += r.culled;
+  high_gradient += r.high_gradient, held_back += r.held_back;
+  for (int b = 0; b < kGradientRatioBins; ++b) gradient_ratio_bins[b] += r.gradient_ratio_bins[b];
+  opacity_reset = opacity_reset || r.opacity_reset;
+  ran = ran || r.ran;
+  return *this;
+}
+
+namespace {
+int gradient_ratio_bin(float ratio) {
+  if (!(ratio >= 0.5f)) return 0;
+  if (ratio < 1.0f) return 1;
+  if (ratio < 2.0f) return 2;
+  if (ratio < 4.0f) return 3;
+  return 4;
+}
+}  // namespace
+
 RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
-                                   bool densify, bool cull_unseen, std::mt19937_64& rng) {
+                                   bool densify, bool cull_unseen, std::mt19937_64& rng, int64_t max_new) {
   RefineReport report;
   report.ran = true;
   const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
@@ -98,34 +118,64 @@ RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings&
   if (cull_unseen)
     for (size_t i = 0; i < n; ++i) unseen[i] = g.max_screen_radius[i] == 0.0f;
   std::vector<uint8_t> remove(n, 0);
+  std::vector<float> mean_grad(n);
+  std::vector<uint8_t> high(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    mean_grad[i] = g.mean_gradient(i, s.stats, image_size);
+    high[i] = g.visible_count[i] > 0 && mean_grad[i] > s.grad_threshold;
+    report.high_gradient += high[i];
+    ++report.gradient_ratio_bins[gradient_ratio_bin(mean_grad[i] / s.grad_threshold)];
+  }
 
   if (densify) {
+    const float log_factor = std::log(s.split_scale_factor);
     std::vector<uint8_t> split(n, 0), dup(n, 0);
     for (size_t i = 0; i < n; ++i) {
-      if (g.visible_count[i] == 0) continue;
-      const float mean_grad = g.absgrad_sum[i] / float(g.visible_count[i]) * 0.5f * float(image_size);
-      if (!(mean_grad > s.grad_threshold)) continue;
-      const float size = max_scale(g.params, i);
       const bool big_on_screen = step < s.stop_screen_size_at && g.max_screen_radius[i] > s.split_screen_size;
-      split[i] = size > s.size_threshold || big_on_screen;
+      const bool big_in_world = max_scale(g.params, i) > s.size_threshold;
+      split[i] = s.split_screen_needs_grad ? high[i] && (big_in_world || big_on_screen)
+                                           : (high[i] && big_in_world) || big_on_screen;
+      // As Splatfacto: a split original shrinks in place before the duplicate test, so a
+      // Gaussian split for its screen size (or just above the size threshold) is also
+      // duplicated, with the reduced scale.
+      const float size_after = std::exp(max_log_scale(g.params, i) - (split[i] ? log_factor : 0.0f));
+      dup[i] = high[i] && size_after <= s.size_threshold;
+    }
+    if (max_new >= 0) {
+      // A growth budget: the candidates with the highest mean gradient go first.
+      std::vector<size_t> order;
+      for (size_t i = 0; i < n; ++i)
+        if (split[i] || dup[i]) order.push_back(i);
+      std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return mean_grad[a] > mean_grad[b]; });
+      int64_t added = 0;
+      for (size_t i : order) {
+        const int64_t cost = (split[i] ? s.split_samples - 1 : 0) + (dup[i] ? 1 : 0);
+        if (added + cost <= max_new) {
+          added += cost;
+        } else {
+          split[i] = dup[i] = 0;
+          ++report.held_back;
+        }
+      }
     }
     const GaussianSet split_set = split_samples(g.params, split, s.split_samples, s.split_scale_factor, rng);
-    // As Splatfacto: the originals of split Gaussians shrink in place before the
-    // duplicate test, so a Gaussian split for its screen size (or just above the size
-    // threshold) is also duplicated, with the reduced scale.
     for (size_t i = 0; i < n; ++i)
       if (split[i])
-        for (int k = 0; k < 3; ++k) g.params.log_scales[3 * i + k] -= std::log(s.split_scale_factor);
-    for (size_t i = 0; i < n; ++i) {
-      if (g.visible_count[i] == 0) continue;
-      const float mean_grad = g.absgrad_sum[i] / float(g.visible_count[i]) * 0.5f * float(image_size);
-      dup[i] = mean_grad > s.grad_threshold && max_scale(g.params, i) <= s.size_threshold;
-    }
+        for (int k = 0; k < 3; ++k) g.params.log_scales[3 * i + k] -= log_factor;
     const GaussianSet dup_set = copy_rows(g.params, dup);
     report.split = std::count(split.begin(), split.end(), 1);
     report.duplicated = std::count(dup.begin(), dup.end(), 1);
     g.append(split_set);
     g.append(dup_set);
+    if (s.inherit_moments) {
+      // Rows appended in the order split_samples and copy_rows produce them.
+      size_t row = n;
+      for (int sample = 0; sample < s.split_samples; ++sample)
+        for (size_t i = 0; i < n; ++i)
+          if (split[i]) g.copy_moments(row++, i);
+      for (size_t i = 0; i < n; ++i)
+        if (dup[i]) g.copy_moments(row++, i);
+    }
     remove = split;  // the originals of split Gaussians go away
     remove.resize(g.size(), 0);
   }

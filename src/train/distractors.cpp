@@ -58,9 +58,64 @@ bool distractor_refine_due(int64_t step, int num_train_views, const DensifySetti
   return step % period < d.refine_every;
 }
 
-RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d, int64_t step, int image_size,
-                                std::mt19937_64& rng) {
-  return apply_density_control(g, d, step, image_size, step < d.stop_split_at, /*cull_unseen=*/true, rng);
+RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d, const DistractorSettings& s,
+                                int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new) {
+  const bool densify = step < d.stop_split_at && step > s.grow_after;
+  return apply_density_control(g, d, step, image_size, densify, /*cull_unseen=*/true, rng, max_new);
+}
+
+int64_t distractor_cap(double static_unexplained_fraction, int64_t pixels, const DistractorSettings& s) {
+  if (s.pixels_per_distractor <= 0) return kUnlimitedGrowth;
+  const double unexplained = std::clamp(static_unexplained_fraction, 0.0, 1.0) * double(pixels);
+  return int64_t(std::floor(unexplained / s.pixels_per_distractor));
+}
+
+int64_t distractor_growth_budget(size_t buffer_size, double static_unexplained_fraction, int64_t pixels,
+                                 const DistractorSettings& s) {
+  const int64_t cap = distractor_cap(static_unexplained_fraction, pixels, s);
+  return cap == kUnlimitedGrowth ? kUnlimitedGrowth : std::max<int64_t>(0, cap - int64_t(buffer_size));
+}
+
+bool distractor_buffer_starved(size_t buffer_size, double static_unexplained_fraction, int64_t pixels) {
+  const double unexplained = static_unexplained_fraction * double(pixels);
+  return static_unexplained_fraction > 0.01 && double(buffer_size) * 256.0 < unexplained;
+}
+
+GaussianSet reseed_distractors(const Camera& cam, std::span<const uint8_t> mask, std::span<const float> target,
+                               size_t count, const DistractorSettings& s, uint64_t seed) {
+  const size_t pixels = size_t(cam.width) * size_t(cam.height);
+  if (mask.size() != pixels || target.size() != 3 * pixels)
+    throw std::invalid_argument("reseed_distractors: mask or target does not match the camera");
+  std::vector<size_t> candidates;
+  for (size_t p = 0; p < pixels; ++p)
+    if (mask[p]) candidates.push_back(p);
+  std::mt19937_64 rng(seed);
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  candidates.resize(std::min(count, candidates.size()));
+  // A footprint of √A pixels: σ = ½·√A px at depth ρ is ρ·½·√A / f in world units.
+  const double footprint_px = std::sqrt(double(s.pixels_per_distractor > 0 ? s.pixels_per_distractor : 4));
+  const float log_scale = float(std::log(s.init_depth * 0.5 * footprint_px / std::max(cam.fx, cam.fy)));
+  const float opacity_logit = std::log(s.init_opacity / (1 - s.init_opacity));
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  GaussianSet g;
+  g.color_mode = ColorMode::RGB;
+  g.resize(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const size_t p = candidates[i];
+    const double u = double(p % cam.width) + 0.5, v = double(p / cam.width) + 0.5;
+    const double pc[3] = {(u - cam.cx) / cam.fx * s.init_depth, (v - cam.cy) / cam.fy * s.init_depth, s.init_depth};
+    for (int k = 0; k < 3; ++k) {
+      double w = 0;  // x_world = Rᵀ (x_cam − t), with R row-major world→camera
+      for (int r = 0; r < 3; ++r) w += cam.R_cw[3 * r + k] * (pc[r] - cam.t_cw[r]);
+      g.means[3 * i + k] = float(w);
+      g.log_scales[3 * i + k] = log_scale;
+    }
+    const std::array<float, 4> q = random_unit_quaternion(rng, normal);
+    for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k];
+    g.opacity_logits[i] = opacity_logit;
+    for (int c = 0; c < 3; ++c) g.colors[3 * i + c] = std::clamp(target[3 * p + c], 0.0f, 1.0f);
+  }
+  return g;
 }
 
 }  // namespace desplat

@@ -45,6 +45,11 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.cull_alpha", &c.densify.cull_alpha},
       {"densify.cull_scale", &c.densify.cull_scale},
       {"densify.cull_screen_size", &c.densify.cull_screen_size},
+      {"densify.normalize_each_step", &c.densify.stats.normalize_each_step},
+      {"densify.visible_count_from_one", &c.densify.stats.visible_count_from_one},
+      {"densify.radius_from_eigenvalue", &c.densify.stats.radius_from_eigenvalue},
+      {"densify.split_screen_needs_grad", &c.densify.split_screen_needs_grad},
+      {"densify.inherit_moments", &c.densify.inherit_moments},
       {"distractors.enabled", &c.distractors.enabled},
       {"distractors.initial_count", &c.distractors.initial_count},
       {"distractors.reference_pixels", &c.distractors.reference_pixels},
@@ -61,6 +66,11 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.regularize", &c.distractors.regularize},
       {"distractors.lambda_static", &c.distractors.lambda_static},
       {"distractors.lambda_distractor", &c.distractors.lambda_distractor},
+      {"distractors.explained_tolerance", &c.distractors.explained_tolerance},
+      {"distractors.lambda_explained", &c.distractors.lambda_explained},
+      {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
+      {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
+      {"distractors.grow_after", &c.distractors.grow_after},
       {"random_background", &c.random_background},
       {"eval_background", &c.eval_background},
       {"random_init_points", &c.random_init_points},
@@ -121,6 +131,10 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
     throw std::invalid_argument("config: distractors.refine_every_epochs must be at least 1");
   if (!(base.distractors.lambda_static >= 0) || !(base.distractors.lambda_distractor >= 0))
     throw std::invalid_argument("config: distractors.lambda_static and lambda_distractor must be ≥ 0");
+  if (!(base.distractors.explained_tolerance > 0) || !(base.distractors.lambda_explained >= 0))
+    throw std::invalid_argument("config: distractors.explained_tolerance must be > 0 and lambda_explained ≥ 0");
+  if (base.distractors.pixels_per_distractor < 0 || base.distractors.grow_after < 0)
+    throw std::invalid_argument("config: distractors.pixels_per_distractor and grow_after must be ≥ 0");
   return base;
 }
 

@@ -65,20 +65,52 @@ void TrainableGaussians::reset_statistics() {
   max_screen_radius.assign(size(), 0.0f);
 }
 
-void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const RasterGradients& grads) {
-  const float inv_size = 1.0f / float(std::max(fw.width, fw.height));
-  // As Splatfacto: the first step after a reset counts every Gaussian once (with a
-  // zero gradient where it was not visible); later steps count visible ones only.
+void TrainableGaussians::copy_moments(size_t dst, size_t src) {
+  for (int g = 0; g < kParamGroups; ++g) {
+    const size_t stride = size_t(floats_per_gaussian(ParamGroup(g)));
+    std::copy_n(adam_m[g].begin() + src * stride, stride, adam_m[g].begin() + dst * stride);
+    std::copy_n(adam_v[g].begin() + src * stride, stride, adam_v[g].begin() + dst * stride);
+  }
+}
+
+namespace {
+// The larger screen radius [px] of a projected Gaussian: 3·√λmax of its 2D covariance
+// (from the conic, the covariance's inverse: λmax(Σ) = 1 / λmin(conic)), or the larger of
+// the rasterizer's per-axis extents.
+float screen_radius_px(const RasterOutput& fw, size_t i, bool from_eigenvalue) {
+  if (!from_eigenvalue) return float(std::max(fw.radii[2 * i], fw.radii[2 * i + 1]));
+  const double a = fw.conics[3 * i], b = fw.conics[3 * i + 1], c = fw.conics[3 * i + 2];
+  const double lambda_min = 0.5 * (a + c) - std::sqrt(0.25 * (a - c) * (a - c) + b * b);
+  if (!(lambda_min > 0)) return float(std::max(fw.radii[2 * i], fw.radii[2 * i + 1]));
+  return float(std::ceil(3.0 * std::sqrt(1.0 / lambda_min)));
+}
+}  // namespace
+
+void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const RasterGradients& grads,
+                                               const StatisticsRules& rules) {
+  const int image_size = std::max(fw.width, fw.height);
+  const float inv_size = 1.0f / float(image_size);
+  const float grad_scale = rules.normalize_each_step ? 0.5f * float(image_size) : 1.0f;
+  // Splatfacto: the first step after a reset counts every Gaussian once (with a zero
+  // gradient where it was not visible); later steps count visible ones only. Authors:
+  // every count starts at 1.
   const bool first = statistics_empty;
   statistics_empty = false;
   for (size_t i = 0; i < size(); ++i) {
-    if (!fw.visible[i] && !first) continue;
-    absgrad_sum[i] += grads.absgrad[i];
+    if (first && rules.visible_count_from_one) visible_count[i] += 1;
+    if (!fw.visible[i] && !(first && !rules.visible_count_from_one)) continue;
+    absgrad_sum[i] += grads.absgrad[i] * grad_scale;
     visible_count[i] += 1;
     if (!fw.visible[i]) continue;
-    const float r = float(std::max(fw.radii[2 * i], fw.radii[2 * i + 1])) * inv_size;
+    const float r = screen_radius_px(fw, i, rules.radius_from_eigenvalue) * inv_size;
     max_screen_radius[i] = std::max(max_screen_radius[i], r);
   }
+}
+
+float TrainableGaussians::mean_gradient(size_t i, const StatisticsRules& rules, int image_size) const {
+  if (visible_count[i] == 0) return 0.0f;
+  const float mean = absgrad_sum[i] / float(visible_count[i]);
+  return rules.normalize_each_step ? mean : mean * 0.5f * float(image_size);
 }
 
 void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a) {

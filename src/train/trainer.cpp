@@ -13,6 +13,7 @@
 
 #include "desplat/train/init.hpp"
 #include "desplat/train/loss.hpp"
+#include "desplat/train/view_residual.hpp"
 
 namespace desplat {
 namespace {
@@ -72,6 +73,9 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
     for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
+    view_static_unexplained.assign(data_.train.size(), 0.0f);
+    view_composite_unexplained.assign(data_.train.size(), 0.0f);
+    view_starved.assign(data_.train.size(), 0);
   }
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
@@ -156,6 +160,15 @@ StepStats Trainer::step() {
       stats.loss += alpha_regularizers(statics, distractor, config_.distractors.lambda_static,
                                        config_.distractors.lambda_distractor, static_pass_.d_alpha,
                                        distractor_pass_.d_alpha);
+    if (config_.distractors.enabled) {
+      const DistractorSettings& ds = config_.distractors;
+      const ViewResidual residual = measure_view_residual(
+          statics, distractor, composite_, target.pixels, bg, ds.explained_tolerance, ds.lambda_explained,
+          distractor_pass_.d_alpha, ds.reseed_starved_views ? &static_unexplained_mask_ : nullptr);
+      stats.loss += residual.penalty;
+      view_static_unexplained[view] = float(residual.static_fraction());
+      view_composite_unexplained[view] = float(residual.composite_fraction());
+    }
     stats.psnr = psnr(composite_, target.pixels);
   });
 
@@ -173,7 +186,7 @@ StepStats Trainer::step() {
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
   const double decay = double(lr.means) / double(config_.lr.means);
   profile.time(&StepTimings::optimizer, [&] {
-    if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads);
+    if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
     gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{});
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
@@ -184,17 +197,19 @@ StepStats Trainer::step() {
   // culling unseen distractors needs them), then every view's refinement when it is due.
   const bool refine_distractors_now =
       distractor_refine_due(step_, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
-  if (distractors || refine_distractors_now) {
+  // A view without distractors that is not due for re-seeding costs nothing here.
+  if (distractors || refine_distractors_now || (config_.distractors.enabled && view_starved[view])) {
     profile.time(&StepTimings::distractor, [&] {
       if (distractors) {
-        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads);
+        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
         LearningRates dlr = config_.distractors.lr;
         dlr.means = float(dlr.means * decay);
         distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{});
         stats.nonfinite_pruned +=
             prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
       }
-      if (refine_distractors_now) stats.distractor_refine = refine_all_distractors(image_size);
+      stats.reseeded = reseed_if_starved(view, cam, target);
+      if (refine_distractors_now) refine_all_distractors(image_size, stats);
     });
   }
   stats.timings = profile.timings;
@@ -203,17 +218,46 @@ StepStats Trainer::step() {
   return stats;
 }
 
-RefineReport Trainer::refine_all_distractors(int image_size) {
-  RefineReport total;
-  total.ran = true;
-  for (TrainableGaussians& d : distractors_) {
-    if (d.size() == 0) continue;
-    const RefineReport r = refine_distractors(d, config_.densify, step_, image_size, rng_);
-    total.split += r.split, total.duplicated += r.duplicated, total.culled += r.culled;
-    // An emptied view gives its memory back; it is never rendered again.
-    if (d.size() == 0) d = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+void Trainer::refine_all_distractors(int image_size, StepStats& stats) {
+  stats.distractor_refine.ran = true;
+  const DistractorSettings& ds = config_.distractors;
+  for (size_t v = 0; v < distractors_.size(); ++v) {
+    TrainableGaussians& d = distractors_[v];
+    const Camera& full = data_.train[v].camera;
+    const int64_t pixels = int64_t(full.width) * full.height;
+    if (d.size() > 0) {
+      ViewRefinement r{int(v), int64_t(d.size()), 0,
+                       distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds), {}};
+      r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget);
+      r.after = int64_t(d.size());
+      stats.distractor_refine += r.report;
+      stats.distractor_refinements.push_back(r);
+      // An emptied view gives its memory back; it is not rendered until it is re-seeded.
+      if (d.size() == 0) d = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+    }
+    view_starved[v] = ds.reseed_starved_views && step_ < config_.densify.stop_split_at &&
+                      distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
   }
-  return total;
+}
+
+int64_t Trainer::reseed_if_starved(int view, const Camera& cam, const FloatImage& target) {
+  if (view_starved.empty() || !view_starved[view]) return 0;
+  view_starved[view] = 0;
+  const DistractorSettings& ds = config_.distractors;
+  const int64_t pixels = int64_t(cam.width) * cam.height;
+  TrainableGaussians& d = distractors_[view];
+  if (!distractor_buffer_starved(d.size(), view_static_unexplained[view], pixels)) return 0;
+  // As many as the growth cap allows (its A, or 4 px per distractor without one), at most
+  // the view's initial K.
+  DistractorSettings capped = ds;
+  if (capped.pixels_per_distractor <= 0) capped.pixels_per_distractor = 4;
+  const Camera& full = data_.train[view].camera;
+  const int64_t wanted = distractor_cap(view_static_unexplained[view], int64_t(full.width) * full.height, capped);
+  const int64_t count = std::min<int64_t>(distractor_count_for(full, ds), wanted) - int64_t(d.size());
+  if (count <= 0) return 0;
+  const GaussianSet seeds = reseed_distractors(cam, static_unexplained_mask_, target.pixels, size_t(count), ds, rng_());
+  d.append(seeds);
+  return int64_t(seeds.size());
 }
 
 // A Gaussian whose parameter or Adam moment is not finite is removed before it can

@@ -29,6 +29,7 @@ struct TrainingRunOptions {
   std::filesystem::path data_dir;    // images/ + sparse/0/
   std::filesystem::path images_dir;  // instead of data_dir: run SfM on a folder of photos
   std::filesystem::path out_dir;
+  std::string preset = "default";    // presets.hpp; the config file applies on top of it
   std::filesystem::path config_file; // JSON overrides of TrainConfig
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;

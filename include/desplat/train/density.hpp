@@ -2,6 +2,7 @@
 // Thresholds are in the normalized world frame (§1) and in screen fractions.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <random>
 
@@ -24,13 +25,34 @@ struct DensifySettings {
   float cull_scale = 0.5f;            // after the first reset: cull max world scale above this
   float cull_screen_size = 0.15f;     // … or screen size above this before stop_screen_size_at
   bool enabled = true;
+  // Measured departures from the authors' code (docs/bench/issue17_ab.md; --preset paper
+  // sets the authors' side of each):
+  StatisticsRules stats;
+  // true: a large-on-screen Gaussian is split only if its gradient is high too. false
+  // (authors): before stop_screen_size_at it is split whatever its gradient.
+  bool split_screen_needs_grad = true;
+  // true: a split or duplicated copy starts with its parent's Adam moments. false
+  // (authors): zero moments, which with a mature bias correction make its first steps
+  // about 3× the learning rate.
+  bool inherit_moments = false;
 };
+
+// The distribution of mean gradient / threshold at a refinement, in bins
+// [0, ½), [½, 1), [1, 2), [2, 4), [4, ∞): the last three are the high-gradient ones.
+constexpr int kGradientRatioBins = 5;
 
 struct RefineReport {
   int64_t split = 0, duplicated = 0, culled = 0;
+  int64_t high_gradient = 0;        // candidates for densification (mean gradient > threshold)
+  int64_t held_back = 0;            // candidates not densified because of a growth budget
+  std::array<int64_t, kGradientRatioBins> gradient_ratio_bins{};
   bool opacity_reset = false;
   bool ran = false;
+  RefineReport& operator+=(const RefineReport& r);
 };
+
+// No limit on how many Gaussians a refinement may add.
+constexpr int64_t kUnlimitedGrowth = -1;
 
 // Called after every optimizer step. `step` counts from 0; `image_size` is max(W, H)
 // of the training images at this step; `num_train_views` is the number of training
@@ -42,8 +64,11 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
 // then cull (opacity, and the scale/screen-size rules by `step`); with `cull_unseen`
 // also every Gaussian not seen since the last refinement (zero max screen radius: the
 // per-view distractor rule of docs/METHOD.md §7). No opacity reset. Clears the statistics.
+// `max_new` ≥ 0 caps the Gaussians densification adds (each split or duplicate adds one
+// with split_samples = 2): the candidates with the highest mean gradient go first.
 RefineReport apply_density_control(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
-                                   bool densify, bool cull_unseen, std::mt19937_64& rng);
+                                   bool densify, bool cull_unseen, std::mt19937_64& rng,
+                                   int64_t max_new = kUnlimitedGrowth);
 
 // Gaussian-wise pieces, exposed for tests.
 GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask, int samples, float scale_factor,

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 
 #include "desplat/core/camera.hpp"
 #include "desplat/train/density.hpp"
@@ -33,6 +34,24 @@ struct DistractorSettings {
   bool regularize = true;       // the two opacity regularizers of §4
   float lambda_static = 0.01f;  // weight of mean(1 − A_s)
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
+
+  // Growth control (docs/METHOD.md §7, growth control): each rule off at 0 / false, as in the authors' code.
+  // A pixel is "explained" by a render when its mean |render − target| over RGB is below
+  // explained_tolerance (in [0, 1] colour units).
+  float explained_tolerance = 0.1f;
+  // Weight of mean(A_d · [the static layer alone explains the pixel]): a distractor over a
+  // pixel the static scene already explains can only be memorizing static detail.
+  float lambda_explained = 0.0f;
+  // Growth cap: a refinement grows a view's buffer to at most (pixels the static layer left
+  // unexplained in the view's latest step, counted at full training resolution) /
+  // pixels_per_distractor, the highest gradients first. 0: unlimited.
+  int pixels_per_distractor = 0;
+  // A view whose buffer has fewer than one distractor per 256 pixels the static layer leaves
+  // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
+  bool reseed_starved_views = false;
+  // Distractor densification starts after this step (culling runs from the warm-up on), so
+  // the static layer has had its chance at content few views see.
+  int grow_after = 0;
 };
 
 // K for a view of this camera's size: initial_count scaled by pixels / reference_pixels
@@ -55,7 +74,30 @@ bool distractor_refine_due(int64_t step, int num_train_views, const DensifySetti
 // One view's refinement (§7): the static thresholds on the view's own statistics, split /
 // duplicate until densify.stop_split_at, culling always, including every distractor the
 // view did not see since the last refinement. No opacity reset.
-RefineReport refine_distractors(TrainableGaussians& view_distractors, const DensifySettings& densify, int64_t step,
-                                int image_size, std::mt19937_64& rng);
+// `max_new`: the view's growth budget (kUnlimitedGrowth: none).
+RefineReport refine_distractors(TrainableGaussians& view_distractors, const DensifySettings& densify,
+                                const DistractorSettings& settings, int64_t step, int image_size, std::mt19937_64& rng,
+                                int64_t max_new = kUnlimitedGrowth);
+
+// A view's distractor cap: static_unexplained_fraction · pixels / pixels_per_distractor
+// (rounded down; the fraction clamped to [0, 1]), with `pixels` = W·H of the view at full
+// training resolution. kUnlimitedGrowth when pixels_per_distractor is 0.
+int64_t distractor_cap(double static_unexplained_fraction, int64_t pixels, const DistractorSettings& settings);
+// How many Gaussians a refinement may add to a buffer of `buffer_size`: max(0, cap − size),
+// or kUnlimitedGrowth.
+int64_t distractor_growth_budget(size_t buffer_size, double static_unexplained_fraction, int64_t pixels,
+                                 const DistractorSettings& settings);
+
+// Whether a view's buffer is starved (reseed_starved_views): more than 1 % of its pixels
+// unexplained by the static layer and fewer than one distractor per 256 of them.
+bool distractor_buffer_starved(size_t buffer_size, double static_unexplained_fraction, int64_t pixels);
+
+// `count` new distractors for a starved view, one per pixel drawn (without replacement,
+// in random order) from `mask` ([H·W] of `camera`, nonzero = unexplained), placed on the
+// initialization plane (depth init_depth) along that pixel's ray, with the target's colour
+// there (`target` [H·W·3]), the initial opacity, and a footprint of about
+// √pixels_per_distractor pixels (2 when that is 0). Deterministic for a seed.
+GaussianSet reseed_distractors(const Camera& camera, std::span<const uint8_t> mask, std::span<const float> target,
+                               size_t count, const DistractorSettings& settings, uint64_t seed);
 
 }  // namespace desplat

@@ -14,6 +14,23 @@
 
 namespace desplat {
 
+// How the densification statistics are gathered and read (docs/METHOD.md §7). Each switch
+// is a measured departure from the authors' code (docs/bench/issue17_ab.md); --preset paper
+// sets the authors' choice.
+struct StatisticsRules {
+  // true: each step's gradient is scaled by 0.5·max(W, H) of that step's image, so a
+  // refinement just after a resolution switch judges all its steps in the same units.
+  // false (authors): the sum is scaled once, by the image size of the refinement's step.
+  bool normalize_each_step = false;
+  // true (authors): every Gaussian's count starts at 1 and adds 1 per step it is visible.
+  // false (Splatfacto): the first step after a reset counts every Gaussian once, later
+  // steps count visible ones only.
+  bool visible_count_from_one = false;
+  // true (authors' gsplat): screen radius 3·√λmax of the 2D covariance. false: the
+  // larger of the rasterizer's per-axis extents 3.33·√Σii.
+  bool radius_from_eigenvalue = false;
+};
+
 // Adam hyper-parameters (docs/METHOD.md §6).
 struct AdamSettings {
   float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
@@ -39,9 +56,16 @@ struct TrainableGaussians {
   void keep(const std::vector<uint8_t>& keep);
   // Appends Gaussians (same color mode and SH degree) with zero moments and statistics.
   void append(const GaussianSet& extra);
+  // Row `dst` takes row `src`'s Adam moments (a densified copy continuing its parent's).
+  void copy_moments(size_t dst, size_t src);
   void reset_statistics();
   // Records one step's statistics from the rasterizer's outputs for this view.
-  void accumulate_statistics(const RasterOutput& forward, const RasterGradients& grads);
+  void accumulate_statistics(const RasterOutput& forward, const RasterGradients& grads,
+                             const StatisticsRules& rules = {});
+  // Gaussian i's mean gradient since the last reset in the units of the densification
+  // threshold; `image_size` = max(W, H) of the refinement step's image (used when the
+  // rules normalize at the refinement). 0 when it was never counted.
+  float mean_gradient(size_t i, const StatisticsRules& rules, int image_size) const;
 
   // One Adam step (PyTorch's formulation) over every group with the given rates.
   void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {});

@@ -106,6 +106,13 @@ struct LayerPass {
   }
 };
 
+// One view's distractor refinement, for the history in metrics.json.
+struct ViewRefinement {
+  int view = 0;              // index into data.train
+  int64_t before = 0, after = 0, budget = kUnlimitedGrowth;
+  RefineReport report;
+};
+
 struct StepStats {
   int64_t step = 0;
   double loss = 0, psnr = 0;
@@ -113,6 +120,8 @@ struct StepStats {
   size_t view_distractors = 0;      // distractors of this step's view
   RefineReport refine;
   RefineReport distractor_refine;   // summed over views when they were refined this step
+  std::vector<ViewRefinement> distractor_refinements;  // per view, when they were refined
+  int64_t reseeded = 0;             // distractors added to this step's starved view
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
 };
@@ -155,6 +164,10 @@ class Trainer {
   // Exposed for checkpointing: the epoch permutation and the position in it.
   std::vector<int32_t> view_order;
   int64_t view_order_pos = 0;
+  // Per training view, from its latest step (docs/METHOD.md §7, growth control): the fractions of pixels the
+  // static layer and the composite leave unexplained, and whether its buffer is starved.
+  std::vector<float> view_static_unexplained, view_composite_unexplained;
+  std::vector<int32_t> view_starved;
   void set_step(int64_t s) { step_ = s; }
 
  private:
@@ -169,13 +182,16 @@ class Trainer {
   // Scratch reused every step.
   LayerPass static_pass_, distractor_pass_;
   std::vector<float> composite_, d_composite_;
+  std::vector<uint8_t> static_unexplained_mask_;
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
-  RefineReport refine_all_distractors(int image_size);
+  void refine_all_distractors(int image_size, StepStats& stats);
+  // Re-seeds this step's view when its buffer is starved (docs/METHOD.md §7, growth control).
+  int64_t reseed_if_starved(int view, const Camera& camera, const FloatImage& target);
 };
 
 // Camera and image at 1/factor resolution (block average, sizes rounded down).

@@ -1,0 +1,21 @@
+// Named starting configurations for desplat_train --preset (docs/METHOD.md §7, presets):
+//   "default"  TrainConfig{}: the choices that measure best (docs/bench/issue17_ab.md);
+//   "paper"    the authors' code's behaviour, for reproducing the paper: their densification
+//              statistics and split rule, 1,000 distractors per view whatever the image
+//              size, and none of our distractor growth rules.
+// A --config file is applied on top of the preset.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "desplat/train/trainer.hpp"
+
+namespace desplat {
+
+std::vector<std::string> preset_names();
+// Throws std::invalid_argument naming the preset and the known ones.
+TrainConfig preset_config(std::string_view name);
+
+}  // namespace desplat

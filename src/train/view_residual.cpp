@@ -1,0 +1,48 @@
+// Per-step residual of a training view (docs/METHOD.md §7, growth control).
+#include "desplat/train/view_residual.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace desplat {
+
+ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
+                                   std::span<const float> target, const std::array<float, 3>& bg, float tolerance,
+                                   float lambda_explained, std::span<float> d_distractor_alpha,
+                                   std::vector<uint8_t>* mask) {
+  const size_t pixels = statics.alpha.size();
+  if (statics.color.size() != 3 * pixels || composite.size() != 3 * pixels || target.size() != 3 * pixels)
+    throw std::invalid_argument("measure_view_residual: image sizes differ");
+  const bool has_distractor = !distractor.alpha.empty();
+  const bool penalize = lambda_explained > 0 && has_distractor;
+  if (penalize && (distractor.alpha.size() != pixels || d_distractor_alpha.size() != pixels))
+    throw std::invalid_argument("measure_view_residual: distractor layer size differs");
+  if (mask) mask->assign(pixels, 0);
+  ViewResidual r;
+  r.pixels = int64_t(pixels);
+  const float weight = penalize ? lambda_explained / float(pixels) : 0.0f;
+  double penalty_sum = 0;
+  for (size_t p = 0; p < pixels; ++p) {
+    float static_err = 0, composite_err = 0;
+    const float transmittance = 1.0f - statics.alpha[p];
+    for (int c = 0; c < 3; ++c) {
+      const float s = std::clamp(statics.color[3 * p + c] + transmittance * bg[c], 0.0f, 1.0f);
+      static_err += std::abs(s - target[3 * p + c]);
+      composite_err += std::abs(composite[3 * p + c] - target[3 * p + c]);
+    }
+    // NaN counts as unexplained: !(err < tol).
+    const bool static_explains = static_err < 3.0f * tolerance;
+    r.static_unexplained += !static_explains;
+    r.composite_unexplained += !(composite_err < 3.0f * tolerance);
+    if (mask) (*mask)[p] = !static_explains;
+    if (penalize && static_explains) {
+      penalty_sum += distractor.alpha[p];
+      d_distractor_alpha[p] += weight;
+    }
+  }
+  r.penalty = penalize ? double(lambda_explained) * penalty_sum / double(pixels) : 0.0;
+  return r;
+}
+
+}  // namespace desplat

@@ -1,0 +1,353 @@
+// The densification switches and distractor growth rules of docs/METHOD.md §7–8, each on a
+// hand-computed case: gradient statistics, the split rule, inherited moments, the growth
+// budget, starved buffers and their re-seeding, the explained-pixel penalty and the presets.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "desplat/train/density.hpp"
+#include "desplat/train/distractors.hpp"
+#include "desplat/train/presets.hpp"
+#include "desplat/train/view_residual.hpp"
+#include "desplat/train/trainer.hpp"
+#include "support/expect.hpp"
+#include "support/synthetic_views.hpp"
+
+namespace desplat {
+namespace {
+
+float logit(float p) { return std::log(p / (1 - p)); }
+
+// n Gaussians of one world scale and opacity 0.5, with zero statistics.
+TrainableGaussians gaussians(size_t n, float scale) {
+  GaussianSet g;
+  g.color_mode = ColorMode::RGB;
+  g.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) g.means[3 * i + k] = float(i), g.log_scales[3 * i + k] = std::log(scale);
+    g.quats[4 * i] = 1;
+    g.opacity_logits[i] = logit(0.5f);
+  }
+  return TrainableGaussians(g);
+}
+
+// A forward output in which Gaussian i is visible with per-axis radius radii[i] and
+// conic (a, b, c); gradients absgrad[i].
+struct FakeStep {
+  RasterOutput fw;
+  RasterGradients grads;
+};
+FakeStep fake_step(int size, const std::vector<uint8_t>& visible, const std::vector<float>& absgrad) {
+  FakeStep s;
+  s.fw.width = s.fw.height = size;
+  s.fw.visible = visible;
+  s.fw.radii.assign(2 * visible.size(), 2);
+  s.fw.conics.assign(3 * visible.size(), 1.0f);
+  for (size_t i = 0; i < visible.size(); ++i) s.fw.conics[3 * i + 1] = 0.0f;
+  s.grads.absgrad = absgrad;
+  return s;
+}
+
+TEST(StatisticsRules, EachStepNormalizedAtItsOwnResolution) {
+  // Step 1 at 100 px with |g| = 0.002, step 2 at 200 px with |g| = 0.001.
+  StatisticsRules per_step;
+  per_step.normalize_each_step = true;
+  TrainableGaussians a = gaussians(1, 0.01f), b = gaussians(1, 0.01f);
+  const FakeStep s1 = fake_step(100, {1}, {0.002f}), s2 = fake_step(200, {1}, {0.001f});
+  a.accumulate_statistics(s1.fw, s1.grads, per_step);
+  a.accumulate_statistics(s2.fw, s2.grads, per_step);
+  // (0.002·50 + 0.001·100) / 2 = 0.1 whatever the refinement's image size.
+  EXPECT_NEAR(a.mean_gradient(0, per_step, 200), 0.1f, 1e-6f);
+  EXPECT_NEAR(a.mean_gradient(0, per_step, 50), 0.1f, 1e-6f);
+  // Authors: (0.003 / 2) · 0.5 · 200 = 0.15 when judged at 200 px: the 100 px step counts double.
+  const StatisticsRules authors;
+  b.accumulate_statistics(s1.fw, s1.grads, authors);
+  b.accumulate_statistics(s2.fw, s2.grads, authors);
+  EXPECT_NEAR(b.mean_gradient(0, authors, 200), 0.15f, 1e-6f);
+}
+
+TEST(StatisticsRules, VisibleCountFromOneOrSplatfactosFirstStep) {
+  // Gaussian 0 visible in both steps, 1 only in the second, 2 in neither.
+  const FakeStep s1 = fake_step(10, {1, 0, 0}, {1, 0, 0}), s2 = fake_step(10, {1, 1, 0}, {1, 1, 0});
+  StatisticsRules from_one;
+  from_one.visible_count_from_one = true;
+  TrainableGaussians a = gaussians(3, 0.01f), b = gaussians(3, 0.01f);
+  for (const FakeStep* s : {&s1, &s2}) a.accumulate_statistics(s->fw, s->grads, from_one);
+  EXPECT_EQ(a.visible_count, (std::vector<int32_t>{3, 2, 1}));  // 1 + visible steps
+  for (const FakeStep* s : {&s1, &s2}) b.accumulate_statistics(s->fw, s->grads, StatisticsRules{});
+  EXPECT_EQ(b.visible_count, (std::vector<int32_t>{2, 2, 1}));  // first step counts all once
+  EXPECT_EQ(a.absgrad_sum, b.absgrad_sum);
+}
+
+TEST(StatisticsRules, ScreenRadiusFromTheLargestEigenvalue) {
+  // 2D covariance [[4, 0], [0, 1]] rotated by 45°: [[2.5, 1.5], [1.5, 2.5]]; its inverse (the
+  // conic) is [[2.5, −1.5], [−1.5, 2.5]] / 4. λmax = 4 → 3·√4 = 6 px; per-axis radii say 7.
+  FakeStep s = fake_step(100, {1}, {0.0f});
+  s.fw.conics = {2.5f / 4, -1.5f / 4, 2.5f / 4};
+  s.fw.radii = {7, 7};
+  StatisticsRules eigen;
+  eigen.radius_from_eigenvalue = true;
+  TrainableGaussians a = gaussians(1, 0.01f), b = gaussians(1, 0.01f);
+  a.accumulate_statistics(s.fw, s.grads, eigen);
+  b.accumulate_statistics(s.fw, s.grads, StatisticsRules{});
+  EXPECT_FLOAT_EQ(a.max_screen_radius[0], 0.06f);
+  EXPECT_FLOAT_EQ(b.max_screen_radius[0], 0.07f);
+}
+
+// Gaussian with mean gradient `grad` (threshold units, image size 100, 4 steps) and screen size.
+void set_stats(TrainableGaussians& t, size_t i, float grad, float screen) {
+  t.visible_count[i] = 4;
+  t.absgrad_sum[i] = grad * 4 / (0.5f * 100);
+  t.max_screen_radius[i] = screen;
+  t.statistics_empty = false;
+}
+
+TEST(DensityRules, AuthorsSplitLargeOnScreenWhateverTheGradient) {
+  DensifySettings ours, authors;
+  authors.split_screen_needs_grad = false;
+  for (const auto& [settings, want_split] : {std::pair{ours, 0}, std::pair{authors, 1}}) {
+    TrainableGaussians t = gaussians(1, 0.005f);
+    set_stats(t, 0, 0.0001f, 0.06f);  // low gradient, 6 % of the image on screen
+    std::mt19937_64 rng(1);
+    const RefineReport r = apply_density_control(t, settings, 1000, 100, true, false, rng);
+    EXPECT_EQ(r.split, want_split);
+    EXPECT_EQ(r.duplicated, 0);
+    EXPECT_EQ(t.size(), want_split ? 2u : 1u);
+  }
+  // After stop_screen_size_at the screen rule is off for both.
+  TrainableGaussians t = gaussians(1, 0.005f);
+  set_stats(t, 0, 0.0001f, 0.06f);
+  std::mt19937_64 rng(1);
+  EXPECT_EQ(apply_density_control(t, authors, 4000, 100, true, false, rng).split, 0);
+}
+
+TEST(DensityRules, CopiesInheritTheirParentsMomentsWhenAsked) {
+  for (const bool inherit : {false, true}) {
+    DensifySettings s;
+    s.inherit_moments = inherit;
+    TrainableGaussians t = gaussians(2, 0.005f);  // small: a high gradient duplicates
+    set_stats(t, 0, 0.002f, 0.01f);
+    set_stats(t, 1, 0.0001f, 0.01f);
+    for (int g = 0; g < kParamGroups; ++g) {
+      const int w = t.floats_per_gaussian(ParamGroup(g));
+      for (int k = 0; k < w; ++k) t.adam_m[g][k] = 3.0f, t.adam_v[g][k] = 5.0f, t.adam_m[g][w + k] = 7.0f;
+    }
+    std::mt19937_64 rng(1);
+    ASSERT_EQ(apply_density_control(t, s, 1000, 100, true, false, rng).duplicated, 1);
+    ASSERT_EQ(t.size(), 3u);  // the two originals, then the copy of Gaussian 0
+    EXPECT_EQ(t.adam_m[0][6], inherit ? 3.0f : 0.0f);
+    EXPECT_EQ(t.adam_v[0][6], inherit ? 5.0f : 0.0f);
+    EXPECT_EQ(t.adam_m[0][3], 7.0f);  // the originals keep theirs
+  }
+}
+
+TEST(DensityRules, GrowthBudgetTakesTheHighestGradientsFirst) {
+  // Four small Gaussians, three with a high gradient (2.5×, 5×, 3× the threshold): each
+  // duplicate adds one; a budget of 2 takes Gaussians 1 and 2.
+  DensifySettings s;
+  TrainableGaussians t = gaussians(4, 0.005f);
+  const float thr = s.grad_threshold;
+  set_stats(t, 0, 2.5f * thr, 0.01f);
+  set_stats(t, 1, 5 * thr, 0.01f);
+  set_stats(t, 2, 3 * thr, 0.01f);
+  set_stats(t, 3, 0.1f * thr, 0.01f);
+  std::mt19937_64 rng(1);
+  const RefineReport r = apply_density_control(t, s, 1000, 100, true, false, rng, 2);
+  EXPECT_EQ(r.high_gradient, 3);
+  EXPECT_EQ(r.duplicated, 2);
+  EXPECT_EQ(r.held_back, 1);
+  ASSERT_EQ(t.size(), 6u);
+  EXPECT_EQ(t.params.means[3 * 4], 1.0f);  // copies of Gaussians 1 and 2, in row order
+  EXPECT_EQ(t.params.means[3 * 5], 2.0f);
+  // Bins [0, ½), [½, 1), [1, 2), [2, 4), [4, ∞) of mean gradient / threshold.
+  EXPECT_EQ(r.gradient_ratio_bins, (std::array<int64_t, kGradientRatioBins>{1, 0, 0, 2, 1}));
+  // A budget of zero: nothing added; no budget: all three.
+  TrainableGaussians u = gaussians(4, 0.005f);
+  for (size_t i = 0; i < 3; ++i) set_stats(u, i, 2 * thr, 0.01f);
+  std::mt19937_64 rng2(1);
+  EXPECT_EQ(apply_density_control(u, s, 1000, 100, true, false, rng2, 0).held_back, 3);
+  EXPECT_EQ(u.size(), 4u);
+}
+
+TEST(DistractorGrowth, CapIsUnexplainedPixelsPerDistractor) {
+  DistractorSettings s;
+  EXPECT_EQ(distractor_growth_budget(100, 0.1, 10000, s), kUnlimitedGrowth);  // off by default
+  s.pixels_per_distractor = 16;
+  EXPECT_EQ(distractor_cap(0.1, 10000, s), 62);             // 1,000 px / 16
+  EXPECT_EQ(distractor_growth_budget(50, 0.1, 10000, s), 12);
+  EXPECT_EQ(distractor_growth_budget(80, 0.1, 10000, s), 0);  // over the cap: no growth (no forced shrink)
+  EXPECT_EQ(distractor_growth_budget(0, 0.0, 10000, s), 0);
+  EXPECT_EQ(distractor_cap(2.0, 160, s), 10);                // fraction clamped to 1
+}
+
+TEST(DistractorGrowth, StarvedBufferRule) {
+  // 10,000 px, 5 % unexplained = 500 px: starved below 500 / 256 ≈ 1.95 distractors.
+  EXPECT_TRUE(distractor_buffer_starved(0, 0.05, 10000));
+  EXPECT_TRUE(distractor_buffer_starved(1, 0.05, 10000));
+  EXPECT_FALSE(distractor_buffer_starved(2, 0.05, 10000));
+  EXPECT_FALSE(distractor_buffer_starved(0, 0.005, 10000));  // under 1 % of the frame: nothing to do
+}
+
+TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
+  Camera cam;
+  cam.width = 8, cam.height = 6, cam.fx = cam.fy = 10, cam.cx = 4, cam.cy = 3;
+  cam.t_cw = {0.5f, -0.25f, 1.0f};
+  std::vector<uint8_t> mask(48, 0);
+  mask[1 * 8 + 2] = mask[4 * 8 + 6] = mask[5 * 8 + 0] = 1;
+  std::vector<float> target(48 * 3);
+  for (size_t i = 0; i < target.size(); ++i) target[i] = float(i % 7) / 7.0f;
+  DistractorSettings s;
+  const GaussianSet g = reseed_distractors(cam, mask, target, 10, s, 3);
+  ASSERT_EQ(g.size(), 3u);  // only three pixels to draw from
+  std::vector<int> hit;
+  for (size_t i = 0; i < g.size(); ++i) {
+    // Back into the camera: depth ρ and the pixel's centre.
+    double pc[3];
+    for (int r = 0; r < 3; ++r) pc[r] = cam.R_cw[3 * r] * g.means[3 * i] + cam.R_cw[3 * r + 1] * g.means[3 * i + 1] +
+                                        cam.R_cw[3 * r + 2] * g.means[3 * i + 2] + cam.t_cw[r];
+    EXPECT_NEAR(pc[2], s.init_depth, 1e-6);
+    const double u = cam.fx * pc[0] / pc[2] + cam.cx, v = cam.fy * pc[1] / pc[2] + cam.cy;
+    EXPECT_NEAR(u - std::floor(u), 0.5, 1e-3);
+    EXPECT_NEAR(v - std::floor(v), 0.5, 1e-3);
+    const int p = int(std::floor(v)) * 8 + int(std::floor(u));
+    EXPECT_TRUE(mask[p]) << p;
+    hit.push_back(p);
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(g.colors[3 * i + c], target[3 * p + c]);
+    EXPECT_NEAR(1 / (1 + std::exp(-g.opacity_logits[i])), s.init_opacity, 1e-6);
+    // σ = ρ·½·√4 / f without a growth cap: one pixel at the plane's depth.
+    EXPECT_NEAR(std::exp(g.log_scales[3 * i]) * cam.fx / s.init_depth, 1.0, 1e-4);
+  }
+  std::sort(hit.begin(), hit.end());
+  EXPECT_EQ(hit, (std::vector<int>{10, 38, 40}));
+  EXPECT_EQ(reseed_distractors(cam, mask, target, 2, s, 3).size(), 2u);
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { reseed_distractors(cam, mask, {}, 2, s, 3); }),
+                  "does not match the camera");
+}
+
+TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
+  // Three pixels, black background, τ = 0.1 (mean |error| over RGB).
+  // 0: static 0.5 grey opaque, target 0.52 → explained by static; composite also explains it.
+  // 1: static 0.5, target 0.9 → unexplained by static; the distractor makes the composite right.
+  // 2: static 0.2, target 0.8 → unexplained by both.
+  const std::vector<float> sc = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.2f, 0.2f, 0.2f}, sa = {1, 1, 1};
+  const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
+  const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
+  std::vector<float> composite(9);
+  composite_layers({sc, sa}, {dc, da}, {0, 0, 0}, composite);
+  std::vector<float> d_alpha = {1, 1, 1};
+  std::vector<uint8_t> mask;
+  const ViewResidual r =
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, {0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask);
+  EXPECT_EQ(r.pixels, 3);
+  EXPECT_EQ(r.static_unexplained, 2);
+  // Pixel 0's composite is 0.75·0.5 = 0.375 (the distractor's black at α ¼): off by 0.145 → unexplained too.
+  EXPECT_EQ(r.composite_unexplained, 2);
+  EXPECT_EQ(mask, (std::vector<uint8_t>{0, 1, 1}));
+  EXPECT_NEAR(r.penalty, 0.3 * 0.25 / 3, 1e-7);
+  EXPECT_NEAR(d_alpha[0], 1 + 0.3f / 3, 1e-7);  // added only where static explains the pixel
+  EXPECT_EQ(d_alpha[1], 1.0f);
+  EXPECT_EQ(d_alpha[2], 1.0f);
+}
+
+TEST(TrainerRules, StatisticsRulesReachTheTrainer) {
+  // Without resolution switches, normalizing each step's gradient by its own image size or
+  // the sum by the refinement's is the same number: the same Gaussians are densified, in
+  // the static set and in every view's buffer.
+  const TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
+  std::vector<std::pair<size_t, size_t>> counts;
+  for (const bool per_step : {false, true}) {
+    TrainConfig c;
+    c.iterations = 151;
+    c.sh_degree = 1;
+    c.num_downscales = 0;
+    c.densify.warmup = 100;
+    c.densify.refine_every = 50;
+    c.densify.stats.normalize_each_step = per_step;
+    c.distractors.initial_count = 100;
+    c.distractors.reference_pixels = 0;
+    c.threads = 1;
+    Trainer t(data, c);
+    const size_t initial = t.gaussians().size();
+    RefineReport distractor_refine;
+    for (int i = 0; i < 151; ++i) {
+      const StepStats s = t.step();
+      distractor_refine += s.distractor_refine;
+    }
+    EXPECT_GT(t.gaussians().size(), initial);  // the refinement at step 150 densified
+    EXPECT_GT(distractor_refine.high_gradient, 0);
+    counts.push_back({t.gaussians().size(), t.distractor_count()});
+  }
+  EXPECT_EQ(counts[0], counts[1]);
+}
+
+TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsReseededThere) {
+  // Training view 0 gets a white 24×24 square the other views do not show; its buffer is
+  // emptied. At the next distractor refinement the view is starved, and its next step
+  // re-seeds it on pixels drawn from those the static layer leaves unexplained: all 576 of
+  // the square's and some of the (still rough) scene's, so the share on the square is
+  // 576 / (unexplained pixels), up to the draw's binomial noise.
+  TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
+  FloatImage& img = data.train[0].image;
+  for (int y = 12; y < 36; ++y)
+    for (int x = 20; x < 44; ++x)
+      for (int c = 0; c < 3; ++c) img.pixels[(size_t(y) * 64 + x) * 3 + c] = 1.0f;
+  TrainConfig c;
+  c.iterations = 400;
+  c.sh_degree = 1;
+  c.num_downscales = 0;
+  c.random_background = false;
+  c.densify.warmup = 200;
+  c.densify.refine_every = 50;
+  c.distractors.initial_count = 100;
+  c.distractors.reference_pixels = 0;
+  c.distractors.refine_every_epochs = 1;
+  c.distractors.reseed_starved_views = true;
+  c.threads = 1;
+  Trainer t(data, c);
+  int64_t reseeded = 0;
+  for (int i = 0; i < 400 && reseeded == 0; ++i) {
+    if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+    reseeded = t.step().reseeded;
+  }
+  ASSERT_GT(reseeded, 0);
+  const GaussianSet& seeds = t.distractors()[0].params;
+  ASSERT_EQ(int64_t(seeds.size()), reseeded);
+  const Camera& cam = data.train[0].camera;
+  int inside = 0;
+  for (size_t i = 0; i < seeds.size(); ++i) {
+    double pc[3];
+    for (int r = 0; r < 3; ++r)
+      pc[r] = cam.R_cw[3 * r] * seeds.means[3 * i] + cam.R_cw[3 * r + 1] * seeds.means[3 * i + 1] +
+              cam.R_cw[3 * r + 2] * seeds.means[3 * i + 2] + cam.t_cw[r];
+    const double u = cam.fx * pc[0] / pc[2] + cam.cx, v = cam.fy * pc[1] / pc[2] + cam.cy;
+    inside += u >= 20 && u < 44 && v >= 12 && v < 36;
+  }
+  const double unexplained = double(t.view_static_unexplained[0]) * 64 * 48;
+  const double p = 576.0 / unexplained, n = double(seeds.size());
+  ASSERT_LE(p, 1.0);
+  EXPECT_NEAR(double(inside) / n, p, 3 * std::sqrt(p * (1 - p) / n) + 1e-9) << inside << " of " << seeds.size();
+  EXPECT_GT(p, 2 * 576.0 / (64 * 48));  // and the square is far more than its share of the frame
+}
+
+TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
+  const TrainConfig paper = preset_config("paper");
+  EXPECT_TRUE(paper.densify.stats.visible_count_from_one);
+  EXPECT_TRUE(paper.densify.stats.radius_from_eigenvalue);
+  EXPECT_FALSE(paper.densify.stats.normalize_each_step);
+  EXPECT_FALSE(paper.densify.split_screen_needs_grad);
+  EXPECT_FALSE(paper.densify.inherit_moments);
+  EXPECT_EQ(paper.distractors.reference_pixels, 0);
+  EXPECT_EQ(paper.distractors.initial_count, 1000);
+  EXPECT_EQ(paper.distractors.pixels_per_distractor, 0);
+  EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
+  EXPECT_FALSE(paper.distractors.reseed_starved_views);
+  EXPECT_EQ(paper.distractors.grow_after, 0);
+  const TrainConfig def = preset_config("default"), plain;
+  EXPECT_EQ(def.densify.stats.normalize_each_step, plain.densify.stats.normalize_each_step);
+  EXPECT_EQ(def.distractors.pixels_per_distractor, plain.distractors.pixels_per_distractor);
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
+                  "unknown preset 'fastest' (known: default, paper)");
+}
+
+}  // namespace
+}  // namespace desplat
