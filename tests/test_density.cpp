@@ -11,8 +11,8 @@ namespace {
 
 float logit(float p) { return std::log(p / (1 - p)); }
 
-// Gaussian i: log-scale from `scale`, opacity, and statistics giving mean grad `grad`
-// (after the ·0.5·max(W, H) normalization, image size 100) over 4 visible steps.
+// Gaussian i: log-scale from `scale`, opacity, and statistics giving mean grad `grad` over 4
+// visible steps, each already normalized by its image size (the default StatisticsRules).
 struct Spec {
   float scale, opacity, grad, screen;
 };
@@ -32,7 +32,7 @@ TrainableGaussians build(const std::vector<Spec>& specs) {
   TrainableGaussians t(g);
   for (size_t i = 0; i < specs.size(); ++i) {
     t.visible_count[i] = 4;
-    t.absgrad_sum[i] = specs[i].grad * 4 / (0.5f * 100);
+    t.absgrad_sum[i] = specs[i].grad * 4;
     t.max_screen_radius[i] = specs[i].screen;
     for (int gr = 0; gr < kParamGroups; ++gr) std::fill(t.adam_m[gr].begin(), t.adam_m[gr].end(), 1.0f);
   }

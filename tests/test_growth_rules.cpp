@@ -60,7 +60,8 @@ TEST(StatisticsRules, EachStepNormalizedAtItsOwnResolution) {
   EXPECT_NEAR(a.mean_gradient(0, per_step, 200), 0.1f, 1e-6f);
   EXPECT_NEAR(a.mean_gradient(0, per_step, 50), 0.1f, 1e-6f);
   // Authors: (0.003 / 2) · 0.5 · 200 = 0.15 when judged at 200 px: the 100 px step counts double.
-  const StatisticsRules authors;
+  StatisticsRules authors;
+  authors.normalize_each_step = false;
   b.accumulate_statistics(s1.fw, s1.grads, authors);
   b.accumulate_statistics(s2.fw, s2.grads, authors);
   EXPECT_NEAR(b.mean_gradient(0, authors, 200), 0.15f, 1e-6f);
@@ -72,9 +73,12 @@ TEST(StatisticsRules, VisibleCountFromOneOrSplatfactosFirstStep) {
   StatisticsRules from_one;
   from_one.visible_count_from_one = true;
   TrainableGaussians a = gaussians(3, 0.01f), b = gaussians(3, 0.01f);
+  from_one.normalize_each_step = false;
   for (const FakeStep* s : {&s1, &s2}) a.accumulate_statistics(s->fw, s->grads, from_one);
   EXPECT_EQ(a.visible_count, (std::vector<int32_t>{3, 2, 1}));  // 1 + visible steps
-  for (const FakeStep* s : {&s1, &s2}) b.accumulate_statistics(s->fw, s->grads, StatisticsRules{});
+  StatisticsRules splatfacto;
+  splatfacto.normalize_each_step = false;
+  for (const FakeStep* s : {&s1, &s2}) b.accumulate_statistics(s->fw, s->grads, splatfacto);
   EXPECT_EQ(b.visible_count, (std::vector<int32_t>{2, 2, 1}));  // first step counts all once
   EXPECT_EQ(a.absgrad_sum, b.absgrad_sum);
 }
@@ -94,10 +98,11 @@ TEST(StatisticsRules, ScreenRadiusFromTheLargestEigenvalue) {
   EXPECT_FLOAT_EQ(b.max_screen_radius[0], 0.07f);
 }
 
-// Gaussian with mean gradient `grad` (threshold units, image size 100, 4 steps) and screen size.
+// Gaussian with mean gradient `grad` (threshold units; 4 steps, each normalized by its own
+// image size as the default StatisticsRules do) and screen size.
 void set_stats(TrainableGaussians& t, size_t i, float grad, float screen) {
   t.visible_count[i] = 4;
-  t.absgrad_sum[i] = grad * 4 / (0.5f * 100);
+  t.absgrad_sum[i] = grad * 4;
   t.max_screen_radius[i] = screen;
   t.statistics_empty = false;
 }
@@ -171,7 +176,8 @@ TEST(DensityRules, GrowthBudgetTakesTheHighestGradientsFirst) {
 
 TEST(DistractorGrowth, CapIsUnexplainedPixelsPerDistractor) {
   DistractorSettings s;
-  EXPECT_EQ(distractor_growth_budget(100, 0.1, 10000, s), kUnlimitedGrowth);  // off by default
+  s.pixels_per_distractor = 0;
+  EXPECT_EQ(distractor_growth_budget(100, 0.1, 10000, s), kUnlimitedGrowth);  // off at 0 (paper)
   s.pixels_per_distractor = 16;
   EXPECT_EQ(distractor_cap(0.1, 10000, s), 62);             // 1,000 px / 16
   EXPECT_EQ(distractor_growth_budget(50, 0.1, 10000, s), 12);

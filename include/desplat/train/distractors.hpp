@@ -35,20 +35,21 @@ struct DistractorSettings {
   float lambda_static = 0.01f;  // weight of mean(1 − A_s)
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
 
-  // Growth control (docs/METHOD.md §7, growth control): each rule off at 0 / false, as in the authors' code.
+  // Growth control (docs/METHOD.md §7, growth control); each rule is off at 0 / false, as in
+  // the authors' code (--preset paper). Defaults measured in docs/bench/issue17_ab.md.
   // A pixel is "explained" by a render when its mean |render − target| over RGB is below
   // explained_tolerance (in [0, 1] colour units).
   float explained_tolerance = 0.1f;
   // Weight of mean(A_d · [the static layer alone explains the pixel]): a distractor over a
   // pixel the static scene already explains can only be memorizing static detail.
-  float lambda_explained = 0.0f;
+  float lambda_explained = 0.05f;
   // Growth cap: a refinement grows a view's buffer to at most (pixels the static layer left
   // unexplained in the view's latest step, counted at full training resolution) /
   // pixels_per_distractor, the highest gradients first. 0: unlimited.
-  int pixels_per_distractor = 0;
+  int pixels_per_distractor = 4;
   // A view whose buffer has fewer than one distractor per 256 pixels the static layer leaves
   // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
-  bool reseed_starved_views = false;
+  bool reseed_starved_views = true;
   // Distractor densification starts after this step (culling runs from the warm-up on), so
   // the static layer has had its chance at content few views see.
   int grow_after = 0;

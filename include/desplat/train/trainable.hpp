@@ -21,7 +21,7 @@ struct StatisticsRules {
   // true: each step's gradient is scaled by 0.5·max(W, H) of that step's image, so a
   // refinement just after a resolution switch judges all its steps in the same units.
   // false (authors): the sum is scaled once, by the image size of the refinement's step.
-  bool normalize_each_step = false;
+  bool normalize_each_step = true;
   // true (authors): every Gaussian's count starts at 1 and adds 1 per step it is visible.
   // false (Splatfacto): the first step after a reset counts every Gaussian once, later
   // steps count visible ones only.
