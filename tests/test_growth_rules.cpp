@@ -98,6 +98,15 @@ TEST(StatisticsRules, ScreenRadiusFromTheLargestEigenvalue) {
   EXPECT_FLOAT_EQ(b.max_screen_radius[0], 0.07f);
 }
 
+// Where Gaussian i's mean lands in `cam`: (u, v) in pixels and the camera-space depth z.
+std::array<double, 3> project_mean(const Camera& cam, const GaussianSet& g, size_t i) {
+  double pc[3];
+  for (int r = 0; r < 3; ++r)
+    pc[r] = cam.R_cw[3 * r] * g.means[3 * i] + cam.R_cw[3 * r + 1] * g.means[3 * i + 1] +
+            cam.R_cw[3 * r + 2] * g.means[3 * i + 2] + cam.t_cw[r];
+  return {cam.fx * pc[0] / pc[2] + cam.cx, cam.fy * pc[1] / pc[2] + cam.cy, pc[2]};
+}
+
 // Gaussian with mean gradient `grad` (threshold units; 4 steps, each normalized by its own
 // image size as the default StatisticsRules do) and screen size.
 void set_stats(TrainableGaussians& t, size_t i, float grad, float screen) {
@@ -208,11 +217,8 @@ TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
   std::vector<int> hit;
   for (size_t i = 0; i < g.size(); ++i) {
     // Back into the camera: depth ρ and the pixel's centre.
-    double pc[3];
-    for (int r = 0; r < 3; ++r) pc[r] = cam.R_cw[3 * r] * g.means[3 * i] + cam.R_cw[3 * r + 1] * g.means[3 * i + 1] +
-                                        cam.R_cw[3 * r + 2] * g.means[3 * i + 2] + cam.t_cw[r];
-    EXPECT_NEAR(pc[2], s.init_depth, 1e-6);
-    const double u = cam.fx * pc[0] / pc[2] + cam.cx, v = cam.fy * pc[1] / pc[2] + cam.cy;
+    const auto [u, v, z] = project_mean(cam, g, i);
+    EXPECT_NEAR(z, s.init_depth, 1e-6);
     EXPECT_NEAR(u - std::floor(u), 0.5, 1e-3);
     EXPECT_NEAR(v - std::floor(v), 0.5, 1e-3);
     const int p = int(std::floor(v)) * 8 + int(std::floor(u));
@@ -321,11 +327,7 @@ TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsReseededThere) {
   const Camera& cam = data.train[0].camera;
   int inside = 0;
   for (size_t i = 0; i < seeds.size(); ++i) {
-    double pc[3];
-    for (int r = 0; r < 3; ++r)
-      pc[r] = cam.R_cw[3 * r] * seeds.means[3 * i] + cam.R_cw[3 * r + 1] * seeds.means[3 * i + 1] +
-              cam.R_cw[3 * r + 2] * seeds.means[3 * i + 2] + cam.t_cw[r];
-    const double u = cam.fx * pc[0] / pc[2] + cam.cx, v = cam.fy * pc[1] / pc[2] + cam.cy;
+    const auto [u, v, z] = project_mean(cam, seeds, i);
     inside += u >= 20 && u < 44 && v >= 12 && v < 36;
   }
   const double unexplained = double(t.view_static_unexplained[0]) * 64 * 48;
@@ -348,9 +350,14 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
   EXPECT_EQ(paper.distractors.grow_after, 0);
-  const TrainConfig def = preset_config("default"), plain;
-  EXPECT_EQ(def.densify.stats.normalize_each_step, plain.densify.stats.normalize_each_step);
-  EXPECT_EQ(def.distractors.pixels_per_distractor, plain.distractors.pixels_per_distractor);
+  // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
+  const TrainConfig def = preset_config("default");
+  EXPECT_TRUE(def.densify.stats.normalize_each_step);
+  EXPECT_FALSE(def.densify.stats.visible_count_from_one);
+  EXPECT_TRUE(def.densify.split_screen_needs_grad);
+  EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
+  EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
+  EXPECT_TRUE(def.distractors.reseed_starved_views);
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
                   "unknown preset 'fastest' (known: default, paper)");
 }
