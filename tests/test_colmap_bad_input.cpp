@@ -339,6 +339,20 @@ TEST_F(ColmapBadText, MissingPointsLineAtEndOfFile) {
   read_expecting(images_, {":3: image 2: file ends before its POINTS2D line"});
 }
 
+TEST_F(ColmapBadText, ImageNamesThatLeaveTheImageFolder) {
+  // Training writes renders/<name>.png under --out and reads images/<name>: an absolute name
+  // or a '..' would reach outside both folders.
+  spit(images_, "1 1 0 0 0 0 0 0 1 /tmp/x.jpg\n\n");
+  read_expecting(images_, {":1: image 1: image name '/tmp/x.jpg' is an absolute path"});
+  spit(images_, "1 1 0 0 0 0 0 0 1 ../../x.jpg\n\n");
+  read_expecting(images_, {"image name '../../x.jpg' leaves the image folder"});
+  spit(images_, "1 1 0 0 0 0 0 0 1 a/../../x.jpg\n\n");
+  read_expecting(images_, {"leaves the image folder"});
+  // A subfolder is a relative name that stays inside: accepted.
+  spit(images_, "1 1 0 0 0 0 0 0 1 cam1/a..b.jpg\n10 20 7 30 40 -1\n2 0.5 0.5 0.5 0.5 1 2 3 2 b.jpg\n11 21 7\n");
+  EXPECT_EQ(read_model_text(tmp_.path()).images.at(1).name, "cam1/a..b.jpg");
+}
+
 TEST_F(ColmapBadText, DuplicatesAndDanglingReferences) {
   spit(cameras_, std::string(kCamerasTxt) + "1 PINHOLE 10 10 1 1 5 5\n");
   read_expecting(cameras_, {":6: duplicate camera id 1"});

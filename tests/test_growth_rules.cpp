@@ -11,6 +11,7 @@
 #include "desplat/train/view_residual.hpp"
 #include "desplat/train/trainer.hpp"
 #include "support/expect.hpp"
+#include "support/projection.hpp"
 #include "support/synthetic_views.hpp"
 
 namespace desplat {
@@ -98,14 +99,7 @@ TEST(StatisticsRules, ScreenRadiusFromTheLargestEigenvalue) {
   EXPECT_FLOAT_EQ(b.max_screen_radius[0], 0.07f);
 }
 
-// Where Gaussian i's mean lands in `cam`: (u, v) in pixels and the camera-space depth z.
-std::array<double, 3> project_mean(const Camera& cam, const GaussianSet& g, size_t i) {
-  double pc[3];
-  for (int r = 0; r < 3; ++r)
-    pc[r] = cam.R_cw[3 * r] * g.means[3 * i] + cam.R_cw[3 * r + 1] * g.means[3 * i + 1] +
-            cam.R_cw[3 * r + 2] * g.means[3 * i + 2] + cam.t_cw[r];
-  return {cam.fx * pc[0] / pc[2] + cam.cx, cam.fy * pc[1] / pc[2] + cam.cy, pc[2]};
-}
+using test::project_mean;
 
 // Gaussian with mean gradient `grad` (threshold units; 4 steps, each normalized by its own
 // image size as the default StatisticsRules do) and screen size.
@@ -203,6 +197,38 @@ TEST(DistractorGrowth, StarvedBufferRule) {
   EXPECT_FALSE(distractor_buffer_starved(0, 0.005, 10000));  // under 1 % of the frame: nothing to do
 }
 
+TEST(DistractorGrowth, UncoveredSeedCountIsOnePerAPixelsUnderTheCap) {
+  // 10,000 px at full resolution, A = 4: static leaves 20 % unexplained → cap 500.
+  DistractorSettings s;
+  s.pixels_per_distractor = 4;
+  EXPECT_EQ(uncovered_seed_count(100, 0.2, 0.1, 10000, s), 250);  // 1,000 uncovered px / 4
+  EXPECT_EQ(uncovered_seed_count(300, 0.2, 0.1, 10000, s), 200);  // only the cap's room
+  EXPECT_EQ(uncovered_seed_count(600, 0.2, 0.1, 10000, s), 0);    // over the cap
+  EXPECT_EQ(uncovered_seed_count(0, 0.2, 0.01, 10000, s), 0);     // 1 % or less: fitting error
+  EXPECT_EQ(uncovered_seed_count(0, 0.2, 0.011, 10000, s), 27);   // 110 px / 4, rounded down
+  s.pixels_per_distractor = 0;                                    // no cap: 4 px each, unbounded room
+  EXPECT_EQ(uncovered_seed_count(1000000, 0.2, 0.1, 10000, s), 250);
+}
+
+TEST(ViewResidual, ErosionKeepsOnlyRegionInteriors) {
+  // 6×4: a 3×3 block at x 0–2, y 1–3 (touching the left and bottom borders), one isolated
+  // pixel at (5, 0). Only pixels whose in-image neighbours are all set survive: (0, 2) and
+  // (1, 2) have every in-image neighbour inside the block; (0, 3), (1, 3) too (border).
+  std::vector<uint8_t> m = {0, 0, 0, 0, 0, 1,  //
+                            1, 1, 1, 0, 0, 0,  //
+                            1, 1, 1, 0, 0, 0,  //
+                            1, 1, 1, 0, 0, 0};
+  erode_mask(m, 6, 4);
+  EXPECT_EQ(m, (std::vector<uint8_t>{0, 0, 0, 0, 0, 0,  //
+                                     0, 0, 0, 0, 0, 0,  //
+                                     1, 1, 0, 0, 0, 0,  //
+                                     1, 1, 0, 0, 0, 0}));
+  std::vector<uint8_t> full(12, 1);
+  erode_mask(full, 4, 3);
+  EXPECT_EQ(full, std::vector<uint8_t>(12, 1));  // a fully unexplained frame stays whole
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { erode_mask(full, 5, 3); }), "does not match");
+}
+
 TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
   Camera cam;
   cam.width = 8, cam.height = 6, cam.fx = cam.fy = 10, cam.cx = 4, cam.cy = 3;
@@ -254,7 +280,7 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   EXPECT_EQ(r.static_unexplained, 2);
   // Pixel 0's composite is 0.75·0.5 = 0.375 (the distractor's black at α ¼): off by 0.145 → unexplained too.
   EXPECT_EQ(r.composite_unexplained, 2);
-  EXPECT_EQ(mask, (std::vector<uint8_t>{0, 1, 1}));
+  EXPECT_EQ(mask, (std::vector<uint8_t>{0, 0, 1}));  // uncovered: neither layer explains it
   EXPECT_NEAR(r.penalty, 0.3 * 0.25 / 3, 1e-7);
   EXPECT_NEAR(d_alpha[0], 1 + 0.3f / 3, 1e-7);  // added only where static explains the pixel
   EXPECT_EQ(d_alpha[1], 1.0f);
@@ -292,49 +318,113 @@ TEST(TrainerRules, StatisticsRulesReachTheTrainer) {
   EXPECT_EQ(counts[0], counts[1]);
 }
 
-TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsReseededThere) {
-  // Training view 0 gets a white 24×24 square the other views do not show; its buffer is
-  // emptied. At the next distractor refinement the view is starved, and its next step
-  // re-seeds it on pixels drawn from those the static layer leaves unexplained: all 576 of
-  // the square's and some of the (still rough) scene's, so the share on the square is
-  // 576 / (unexplained pixels), up to the draw's binomial noise.
+// 8 synthetic views (64×48); training view 0 gets a white 24×24 square at x 20–43,
+// y 12–35 that the other views do not show.
+TrainingData views_with_a_one_view_square() {
   TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
   FloatImage& img = data.train[0].image;
   for (int y = 12; y < 36; ++y)
     for (int x = 20; x < 44; ++x)
       for (int c = 0; c < 3; ++c) img.pixels[(size_t(y) * 64 + x) * 3 + c] = 1.0f;
+  return data;
+}
+
+// Short runs for the seeding tests: no resolution schedule unless asked, refinements every
+// 50 steps from step 250, one epoch per distractor refinement (8 steps), 100 distractors per view.
+TrainConfig seeding_test_config(int num_downscales = 0) {
   TrainConfig c;
   c.iterations = 400;
   c.sh_degree = 1;
-  c.num_downscales = 0;
+  c.num_downscales = num_downscales;
+  c.resolution_schedule = 250;
   c.random_background = false;
   c.densify.warmup = 200;
   c.densify.refine_every = 50;
   c.distractors.initial_count = 100;
   c.distractors.reference_pixels = 0;
   c.distractors.refine_every_epochs = 1;
-  c.distractors.reseed_starved_views = true;
   c.threads = 1;
-  Trainer t(data, c);
-  int64_t reseeded = 0;
-  for (int i = 0; i < 400 && reseeded == 0; ++i) {
-    if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
-    reseeded = t.step().reseeded;
+  return c;
+}
+
+TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
+  // Training view 0 gets a white 24×24 square the other views do not show; its buffer is
+  // emptied. At the next distractor refinement the view is starved (and uncovered), and its
+  // next step seeds it on pixels drawn from the interiors of what neither layer explains:
+  // the square's 22×22 interior and what survives erosion of the (still rough) scene's
+  // residual. Either rule alone does it. Every seed sits on a pixel of the mask, and the
+  // share on the square is its share of the mask, up to the draw's binomial noise.
+  const TrainingData data = views_with_a_one_view_square();
+  for (const bool starved_rule : {true, false}) {
+    TrainConfig c = seeding_test_config();
+    c.distractors.reseed_starved_views = starved_rule;
+    c.distractors.seed_uncovered = !starved_rule;
+    Trainer t(data, c);
+    int64_t reseeded = 0;
+    for (int i = 0; i < 400 && reseeded == 0; ++i) {
+      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+      reseeded = t.step().reseeded;
+    }
+    ASSERT_GT(reseeded, 0) << "starved rule " << starved_rule;
+    const GaussianSet& seeds = t.distractors()[0].params;
+    ASSERT_EQ(int64_t(seeds.size()), reseeded);
+    const std::vector<uint8_t>& mask = t.uncovered_mask();
+    ASSERT_EQ(mask.size(), size_t(64 * 48));
+    int64_t mask_pixels = 0, mask_in_square = 0;
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 64; ++x) {
+        mask_pixels += mask[size_t(y) * 64 + x];
+        mask_in_square += mask[size_t(y) * 64 + x] && x >= 20 && x < 44 && y >= 12 && y < 36;
+      }
+    EXPECT_GE(mask_in_square, 22 * 22 * 9 / 10);  // the static layer cannot fit a one-view square
+    const Camera& cam = data.train[0].camera;
+    int inside = 0;
+    for (size_t i = 0; i < seeds.size(); ++i) {
+      const auto [u, v, z] = project_mean(cam, seeds, i);
+      const int px = int(std::floor(u)), py = int(std::floor(v));
+      ASSERT_TRUE(px >= 0 && py >= 0 && px < 64 && py < 48 && mask[size_t(py) * 64 + px]) << u << ", " << v;
+      inside += px >= 20 && px < 44 && py >= 12 && py < 36;
+    }
+    const double p = double(mask_in_square) / double(mask_pixels), n = double(seeds.size());
+    EXPECT_NEAR(double(inside) / n, p, 3 * std::sqrt(p * (1 - p) / n) + 1e-9) << inside << " of " << seeds.size();
+    EXPECT_GT(p, 2 * 576.0 / (64 * 48));  // and the square is far more than its share of the frame
   }
-  ASSERT_GT(reseeded, 0);
-  const GaussianSet& seeds = t.distractors()[0].params;
-  ASSERT_EQ(int64_t(seeds.size()), reseeded);
-  const Camera& cam = data.train[0].camera;
-  int inside = 0;
-  for (size_t i = 0; i < seeds.size(); ++i) {
-    const auto [u, v, z] = project_mean(cam, seeds, i);
-    inside += u >= 20 && u < 44 && v >= 12 && v < 36;
+}
+
+TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
+  // Two downscales every 3,000 steps, a 430-step refinement period (10 epochs of 43 views).
+  TrainConfig c;
+  c.num_downscales = 2;
+  c.resolution_schedule = 3000;
+  EXPECT_TRUE(resolution_settled(c, 100, 430));    // before one period: compared with step 0
+  EXPECT_TRUE(resolution_settled(c, 2999, 430));
+  EXPECT_FALSE(resolution_settled(c, 3000, 430));  // factor 2 now, 4 at step 2,570
+  EXPECT_FALSE(resolution_settled(c, 3429, 430));
+  EXPECT_TRUE(resolution_settled(c, 3430, 430));
+  EXPECT_FALSE(resolution_settled(c, 6100, 430));
+  EXPECT_TRUE(resolution_settled(c, 9000, 430));   // full resolution from 6,000 on
+
+  // In a trainer: view 0 over a one-view white square, its buffer emptied before every step
+  // up to 249. 8 views and one epoch per distractor refinement: a period of 8 steps;
+  // refinements every 50 steps from 250. Without downscales the refinement at 250 marks the
+  // view and its next visit (≤ 8 steps on) seeds it; with the resolution switching at 250
+  // that refinement is too early, and seeding waits for the one at 300.
+  const TrainingData data = views_with_a_one_view_square();
+  for (const int downscales : {0, 1}) {
+    Trainer t(data, seeding_test_config(downscales));
+    int64_t seeded_at = -1;
+    for (int i = 0; i < 400 && seeded_at < 0; ++i) {
+      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+      if (t.step().reseeded > 0) seeded_at = i;
+    }
+    if (downscales == 0) {
+      EXPECT_GT(seeded_at, 250);
+      EXPECT_LE(seeded_at, 258);
+    } else {
+      EXPECT_GT(seeded_at, 300);
+      EXPECT_LE(seeded_at, 308);
+    }
   }
-  const double unexplained = double(t.view_static_unexplained[0]) * 64 * 48;
-  const double p = 576.0 / unexplained, n = double(seeds.size());
-  ASSERT_LE(p, 1.0);
-  EXPECT_NEAR(double(inside) / n, p, 3 * std::sqrt(p * (1 - p) / n) + 1e-9) << inside << " of " << seeds.size();
-  EXPECT_GT(p, 2 * 576.0 / (64 * 48));  // and the square is far more than its share of the frame
 }
 
 TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
@@ -349,7 +439,9 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.pixels_per_distractor, 0);
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
+  EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
+  EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
   const TrainConfig def = preset_config("default");
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
@@ -358,6 +450,11 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_TRUE(def.distractors.reseed_starved_views);
+  EXPECT_TRUE(def.distractors.seed_uncovered);
+  EXPECT_EQ(def.distractors.grow_after, 0);
+  EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
+  EXPECT_EQ(def.transient_points.min_track_images, 3);
+  EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
                   "unknown preset 'fastest' (known: default, paper)");
 }

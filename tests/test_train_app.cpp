@@ -135,6 +135,9 @@ TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {
   std::ifstream(out / "metrics.json") >> metrics;
   EXPECT_EQ(metrics["mode"], "static-only");
   EXPECT_EQ(metrics["cost"]["distractor_gaussians"], 0);
+  // The Splatfacto baseline starts from every sparse point, whatever the default does.
+  EXPECT_EQ(metrics["transient_points"]["action"], "keep");
+  EXPECT_EQ(metrics["transient_points"]["points"], 0);
   const Outcome bad = run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " +
                           (root_ / "so_renders").string() + " --views train --mask");
   EXPECT_EQ(bad.exit_code, 1);

@@ -188,7 +188,7 @@ TEST(Training, CheckpointArrayNamesAreTheDocumentedOnes) {
   for (const auto& [name, array] : c.arrays) names.insert(name);
   std::set<std::string> want = {"trainer/view_order", "static/stats/absgrad_sum", "static/stats/visible_count",
                                 "static/stats/max_screen_radius", "trainer/view_static_unexplained",
-                                "trainer/view_composite_unexplained", "trainer/view_starved"};
+                                "trainer/view_composite_unexplained", "trainer/view_seed_due"};
   for (const char* group : {"means", "log_scales", "quats", "opacity_logits", "colors"})
     for (const std::string kind : {"", "adam_m/", "adam_v/"}) want.insert("static/" + kind + group);
   for (const std::string& n : want) EXPECT_TRUE(names.count(n)) << n;

@@ -15,6 +15,16 @@ std::array<float, 3> Camera::center() const {
           -(R[2] * t_cw[0] + R[5] * t_cw[1] + R[8] * t_cw[2])};
 }
 
+long long Camera::pixel_of(const std::array<float, 3>& x) const {
+  double p[3];
+  for (int r = 0; r < 3; ++r)
+    p[r] = double(R_cw[3 * r]) * x[0] + double(R_cw[3 * r + 1]) * x[1] + double(R_cw[3 * r + 2]) * x[2] + t_cw[r];
+  if (!(p[2] > 1e-6)) return -1;
+  const double u = fx * p[0] / p[2] + cx, v = fy * p[1] / p[2] + cy;
+  if (!(u >= 0 && v >= 0 && u < width && v < height)) return -1;
+  return (long long)(v) * width + (long long)(u);
+}
+
 void Camera::validate() const {
   auto fail = [](const std::string& what) { throw std::invalid_argument("camera: " + what); };
   if (!(fx > 0) || !(fy > 0) || !std::isfinite(fx) || !std::isfinite(fy))

@@ -178,6 +178,13 @@ void check_image(const Image& image) {
   if (image.name.empty()) throw ColmapError(who + "empty image name");
   if (image.name.find('\0') != std::string::npos)
     throw ColmapError(who + "image name contains a NUL byte");
+  // Names become paths under the image folder and under output folders: nothing may lead out.
+  const fs::path name_path(image.name);
+  if (name_path.has_root_path())
+    throw ColmapError(who + "image name '" + image.name + "' is an absolute path; names must be relative to the image folder");
+  for (const fs::path& part : name_path)
+    if (part == "..")
+      throw ColmapError(who + "image name '" + image.name + "' leaves the image folder ('..'); names must stay inside it");
   for (size_t k = 0; k < image.points2d.size(); ++k) {
     const Observation& obs = image.points2d[k];
     if (!std::isfinite(obs.x) || !std::isfinite(obs.y))

@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <map>
+#include <set>
 #include <optional>
 
 #include "desplat/io/camera_models.hpp"
@@ -275,11 +276,21 @@ Source choose_source(const fs::path& data, const SceneOptions& options, const fs
 }
 
 void add_points(const colmap::Model& model, const fs::path& sparse, const SceneOptions& options, Scene& scene) {
+  std::map<uint32_t, uint32_t> view_of_image;  // COLMAP image id → index into scene.views
+  for (size_t v = 0; v < scene.views.size(); ++v) view_of_image[scene.views[v].colmap_image_id] = uint32_t(v);
   for (const auto& [id, p] : model.points) {
     const auto x = scene.normalization.to_normalized(p.xyz);
     scene.points_xyz.push_back({float(x[0]), float(x[1]), float(x[2])});
     scene.points_rgb.push_back(p.rgb);
     scene.point_ids.push_back(id);
+    std::set<uint32_t> images;
+    std::set<uint32_t> views;
+    for (const colmap::TrackElement& t : p.track) {
+      images.insert(t.image_id);
+      if (const auto it = view_of_image.find(t.image_id); it != view_of_image.end()) views.insert(it->second);
+    }
+    scene.point_track_images.push_back(uint32_t(images.size()));
+    scene.point_views.emplace_back(views.begin(), views.end());
   }
   if (model.points.empty())
     warn(options.on_warning, &scene.warnings,

@@ -154,7 +154,19 @@ TrainingData load_training_data(const Scene& scene) {
     }
   }
   if (!error.empty()) throw SceneError(error);
-  for (size_t i = 0; i < views.size(); ++i) (scene.views[i].is_test ? data.test : data.train).push_back(std::move(views[i]));
+  std::vector<int32_t> train_index(views.size(), -1);  // scene view → index into data.train
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (!scene.views[i].is_test) train_index[i] = int32_t(data.train.size());
+    (scene.views[i].is_test ? data.test : data.train).push_back(std::move(views[i]));
+  }
+  // The tracks, for transient_points (train/transient_points.hpp).
+  if (scene.point_views.size() == scene.points_xyz.size() && scene.point_track_images.size() == scene.points_xyz.size()) {
+    data.point_track_images = scene.point_track_images;
+    data.point_train_views.resize(scene.point_views.size());
+    for (size_t p = 0; p < scene.point_views.size(); ++p)
+      for (const uint32_t v : scene.point_views[p])
+        if (v < train_index.size() && train_index[v] >= 0) data.point_train_views[p].push_back(train_index[v]);
+  }
   return data;
 }
 
@@ -200,6 +212,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
 
   TrainConfig config = preset_config(opt.preset);
+  // --static-only is the Splatfacto baseline: every sparse point starts a static Gaussian
+  // (a --config may still ask otherwise).
+  if (opt.static_only) config.transient_points.action = TransientPointAction::keep;
   if (!opt.config_file.empty()) {
     std::ifstream f(opt.config_file);
     if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
@@ -265,6 +280,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   model.write_config({config, recipe, run_json});
 
   Trainer trainer(data, config);
+  if (config.transient_points.action != TransientPointAction::keep)
+    std::printf("transient sparse points (%s): %lld of %zu, %lld distractors seeded from them\n",
+                to_string(config.transient_points.action).c_str(), (long long)trainer.transient_point_count,
+                data.points.size(), (long long)trainer.transient_seeded);
   const fs::path ckpt_path = model.checkpoint_path();
   auto save = [&] { model.write_checkpoint(trainer, {{"run", run_json}}); };
   if (opt.resume) {
@@ -335,6 +354,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   metrics["gaussians"] = trainer.gaussians().size();
   metrics["mode"] = config.distractors.enabled ? "desplat" : "static-only";
   metrics["cost"] = model_cost(trainer);
+  metrics["transient_points"] = {{"action", to_string(config.transient_points.action)},
+                                 {"points", trainer.transient_point_count},
+                                 {"seeded_distractors", trainer.transient_seeded}};
   const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
   metrics["distractor_masks"] = mask_json(masks);
   metrics["history"] = history;

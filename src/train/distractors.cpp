@@ -81,6 +81,16 @@ bool distractor_buffer_starved(size_t buffer_size, double static_unexplained_fra
   return static_unexplained_fraction > 0.01 && double(buffer_size) * 256.0 < unexplained;
 }
 
+int64_t uncovered_seed_count(size_t buffer_size, double static_unexplained_fraction,
+                             double composite_unexplained_fraction, int64_t pixels, const DistractorSettings& s) {
+  const double uncovered = std::clamp(composite_unexplained_fraction, 0.0, 1.0);
+  if (!(uncovered > 0.01)) return 0;
+  const int per = s.pixels_per_distractor > 0 ? s.pixels_per_distractor : 4;
+  const int64_t wanted = int64_t(std::floor(uncovered * double(pixels) / per));
+  const int64_t room = distractor_growth_budget(buffer_size, static_unexplained_fraction, pixels, s);
+  return room == kUnlimitedGrowth ? wanted : std::min(wanted, room);
+}
+
 GaussianSet reseed_distractors(const Camera& cam, std::span<const uint8_t> mask, std::span<const float> target,
                                size_t count, const DistractorSettings& s, uint64_t seed) {
   const size_t pixels = size_t(cam.width) * size_t(cam.height);

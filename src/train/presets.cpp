@@ -20,7 +20,9 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.lambda_explained = 0.0f;
     c.distractors.pixels_per_distractor = 0;
     c.distractors.reseed_starved_views = false;
+    c.distractors.seed_uncovered = false;
     c.distractors.grow_after = 0;
+    c.transient_points.action = TransientPointAction::keep;
     return c;
   }
   std::string known;

@@ -7,9 +7,17 @@
 #include <variant>
 
 namespace desplat {
+
+// The action is written and read as its name; an unknown name is an error naming the setting.
+void to_json(nlohmann::json& j, const TransientPointAction& a) { j = to_string(a); }
+void from_json(const nlohmann::json& j, TransientPointAction& a) {
+  if (!j.is_string()) throw std::invalid_argument("config: init.transient_points must be a string (keep, drop or seed)");
+  a = transient_point_action_from_string(j.get<std::string>());
+}
+
 namespace {
 
-using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*>;
+using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*>;
 struct Entry {
   const char* name;
   Field field;
@@ -70,7 +78,11 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.lambda_explained", &c.distractors.lambda_explained},
       {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
+      {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
       {"distractors.grow_after", &c.distractors.grow_after},
+      {"init.transient_points", &c.transient_points.action},
+      {"init.transient_min_track_images", &c.transient_points.min_track_images},
+      {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
       {"random_background", &c.random_background},
       {"eval_background", &c.eval_background},
       {"random_init_points", &c.random_init_points},
@@ -133,6 +145,8 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
     throw std::invalid_argument("config: distractors.lambda_static and lambda_distractor must be ≥ 0");
   if (!(base.distractors.explained_tolerance > 0) || !(base.distractors.lambda_explained >= 0))
     throw std::invalid_argument("config: distractors.explained_tolerance must be > 0 and lambda_explained ≥ 0");
+  if (base.transient_points.min_track_images < 0 || !(base.transient_points.color_tolerance >= 0))
+    throw std::invalid_argument("config: init.transient_min_track_images and init.transient_color_tolerance must be ≥ 0");
   if (base.distractors.pixels_per_distractor < 0 || base.distractors.grow_after < 0)
     throw std::invalid_argument("config: distractors.pixels_per_distractor and grow_after must be ≥ 0");
   return base;

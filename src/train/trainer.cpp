@@ -18,7 +18,19 @@
 namespace desplat {
 namespace {
 
-GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, std::mt19937_64& rng) {
+// `leave_out` [points] or empty: 1 for the points that start no static Gaussian.
+GaussianSet initial_gaussians(const TrainingData& data, const TrainConfig& cfg, std::mt19937_64& rng,
+                              const std::vector<uint8_t>& leave_out) {
+  if (!leave_out.empty()) {
+    std::vector<std::array<float, 3>> xyz;
+    std::vector<std::array<uint8_t, 3>> rgb;
+    for (size_t i = 0; i < data.points.size(); ++i)
+      if (!leave_out[i]) {
+        xyz.push_back(data.points[i]);
+        rgb.push_back(data.colors[i]);
+      }
+    if (!xyz.empty()) return init_gaussians_from_points(xyz, rgb, cfg.sh_degree, rng());
+  }
   if (!data.points.empty()) return init_gaussians_from_points(data.points, data.colors, cfg.sh_degree, rng());
   // No points (docs/METHOD.md §5): uniform in a cube, random colors.
   std::uniform_real_distribution<float> u(-cfg.random_init_extent, cfg.random_init_extent);
@@ -69,13 +81,20 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
-  gaussians_ = TrainableGaussians(initial_gaussians(data_, config_, rng_));
+  std::vector<uint8_t> transient;
+  if (config_.transient_points.action != TransientPointAction::keep) {
+    transient = transient_points(data_, config_.transient_points);
+    for (const uint8_t t : transient) transient_point_count += t;
+  }
+  gaussians_ = TrainableGaussians(initial_gaussians(data_, config_, rng_, transient));
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
     for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
+    if (config_.transient_points.action == TransientPointAction::seed && transient_point_count > 0)
+      seed_from_transient_points(transient);
     view_static_unexplained.assign(data_.train.size(), 0.0f);
     view_composite_unexplained.assign(data_.train.size(), 0.0f);
-    view_starved.assign(data_.train.size(), 0);
+    view_seed_due.assign(data_.train.size(), 0);
   }
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
@@ -164,7 +183,7 @@ StepStats Trainer::step() {
       const DistractorSettings& ds = config_.distractors;
       const ViewResidual residual = measure_view_residual(
           statics, distractor, composite_, target.pixels, bg, ds.explained_tolerance, ds.lambda_explained,
-          distractor_pass_.d_alpha, ds.reseed_starved_views ? &static_unexplained_mask_ : nullptr);
+          distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr);
       stats.loss += residual.penalty;
       view_static_unexplained[view] = float(residual.static_fraction());
       view_composite_unexplained[view] = float(residual.composite_fraction());
@@ -198,7 +217,7 @@ StepStats Trainer::step() {
   const bool refine_distractors_now =
       distractor_refine_due(step_, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
   // A view without distractors that is not due for re-seeding costs nothing here.
-  if (distractors || refine_distractors_now || (config_.distractors.enabled && view_starved[view])) {
+  if (distractors || refine_distractors_now || (config_.distractors.enabled && view_seed_due[view])) {
     profile.time(&StepTimings::distractor, [&] {
       if (distractors) {
         distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
@@ -208,7 +227,7 @@ StepStats Trainer::step() {
         stats.nonfinite_pruned +=
             prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
       }
-      stats.reseeded = reseed_if_starved(view, cam, target);
+      stats.reseeded = seed_if_due(view, cam, target);
       if (refine_distractors_now) refine_all_distractors(image_size, stats);
     });
   }
@@ -235,27 +254,71 @@ void Trainer::refine_all_distractors(int image_size, StepStats& stats) {
       // An emptied view gives its memory back; it is not rendered until it is re-seeded.
       if (d.size() == 0) d = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
     }
-    view_starved[v] = ds.reseed_starved_views && step_ < config_.densify.stop_split_at &&
-                      distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
+    const bool starved = ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
+    const bool uncovered = ds.seed_uncovered && uncovered_seed_count(d.size(), view_static_unexplained[v],
+                                                                     view_composite_unexplained[v], pixels, ds) > 0;
+    view_seed_due[v] = step_ < config_.densify.stop_split_at && seeding_settled() && (starved || uncovered);
   }
 }
 
-int64_t Trainer::reseed_if_starved(int view, const Camera& cam, const FloatImage& target) {
-  if (view_starved.empty() || !view_starved[view]) return 0;
-  view_starved[view] = 0;
+void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) {
+  // One distractor on the pixel each transient point projects to, in every training view
+  // that observes it: the same seeds the growth rules place on uncovered pixels.
+  for (size_t v = 0; v < data_.train.size(); ++v) {
+    const TrainView& view = data_.train[v];
+    const Camera& c = view.camera;
+    std::vector<uint8_t> mask(size_t(c.width) * c.height, 0);
+    size_t count = 0;
+    for (size_t i = 0; i < transient.size(); ++i) {
+      if (!transient[i]) continue;
+      const std::vector<int32_t>& observers = data_.point_train_views[i];
+      if (!std::binary_search(observers.begin(), observers.end(), int32_t(v))) continue;
+      const long long pixel = c.pixel_of(data_.points[i]);
+      if (pixel < 0) continue;
+      uint8_t& m = mask[size_t(pixel)];
+      count += !m;
+      m = 1;
+    }
+    if (count == 0) continue;
+    const GaussianSet seeds = reseed_distractors(c, mask, view.image.pixels, count, config_.distractors, rng_());
+    distractors_[v].append(seeds);
+    transient_seeded += int64_t(seeds.size());
+  }
+}
+
+bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period) {
+  return config.downscale_at(step) == config.downscale_at(std::max<int64_t>(0, step - period));
+}
+
+bool Trainer::seeding_settled() const {
+  const int64_t period = int64_t(config_.distractors.refine_every_epochs) * int64_t(data_.train.size());
+  return resolution_settled(config_, step_, period);
+}
+
+int64_t Trainer::seed_if_due(int view, const Camera& cam, const FloatImage& target) {
+  if (view_seed_due.empty() || !view_seed_due[view]) return 0;
+  view_seed_due[view] = 0;
   const DistractorSettings& ds = config_.distractors;
-  const int64_t pixels = int64_t(cam.width) * cam.height;
   TrainableGaussians& d = distractors_[view];
-  if (!distractor_buffer_starved(d.size(), view_static_unexplained[view], pixels)) return 0;
-  // As many as the growth cap allows (its A, or 4 px per distractor without one), at most
-  // the view's initial K.
-  DistractorSettings capped = ds;
-  if (capped.pixels_per_distractor <= 0) capped.pixels_per_distractor = 4;
   const Camera& full = data_.train[view].camera;
-  const int64_t wanted = distractor_cap(view_static_unexplained[view], int64_t(full.width) * full.height, capped);
-  const int64_t count = std::min<int64_t>(distractor_count_for(full, ds), wanted) - int64_t(d.size());
+  const int64_t full_pixels = int64_t(full.width) * full.height;
+  if (!seeding_settled()) return 0;
+  // This step's residual decides again: the flag was set up to an epoch ago.
+  int64_t count = 0;
+  if (ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[view], full_pixels)) {
+    // As many as the growth cap allows (its A, or 4 px per distractor without one), at most
+    // the view's initial K.
+    DistractorSettings capped = ds;
+    if (capped.pixels_per_distractor <= 0) capped.pixels_per_distractor = 4;
+    const int64_t wanted = distractor_cap(view_static_unexplained[view], full_pixels, capped);
+    count = std::min<int64_t>(distractor_count_for(full, ds), wanted) - int64_t(d.size());
+  } else if (ds.seed_uncovered) {
+    count = uncovered_seed_count(d.size(), view_static_unexplained[view], view_composite_unexplained[view],
+                                 full_pixels, ds);
+  }
   if (count <= 0) return 0;
-  const GaussianSet seeds = reseed_distractors(cam, static_unexplained_mask_, target.pixels, size_t(count), ds, rng_());
+  erode_mask(uncovered_mask_, cam.width, cam.height);
+  const GaussianSet seeds = reseed_distractors(cam, uncovered_mask_, target.pixels, size_t(count), ds, rng_());
   d.append(seeds);
   return int64_t(seeds.size());
 }

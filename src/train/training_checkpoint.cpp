@@ -1,7 +1,7 @@
 // Names of the checkpoint arrays, for a prefix P = "static" or "distractor/<train view index>":
 // "P/<group>", "P/adam_m/<group>", "P/adam_v/<group>", "P/stats/<name>"; and
 // "trainer/view_order", and per training view (distractors on) "trainer/view_static_unexplained",
-// "trainer/view_composite_unexplained", "trainer/view_starved". Per-set scalars (Adam step, statistics flag) are in the metadata:
+// "trainer/view_composite_unexplained", "trainer/view_seed_due". Per-set scalars (Adam step, statistics flag) are in the metadata:
 // "adam_step"/"statistics_empty" for the static set, "distractors": {"views": [names],
 // "adam_step": [...], "statistics_empty": [...]} for the per-view sets.
 #include "desplat/train/training_checkpoint.hpp"
@@ -76,7 +76,7 @@ Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extr
     const uint64_t nv = t.distractors().size();
     c.put("trainer/view_static_unexplained", {nv}, t.view_static_unexplained);
     c.put("trainer/view_composite_unexplained", {nv}, t.view_composite_unexplained);
-    c.put("trainer/view_starved", {nv}, t.view_starved);
+    c.put("trainer/view_seed_due", {nv}, t.view_seed_due);
   }
   c.put("trainer/view_order", {t.view_order.size()}, t.view_order);
   return c;
@@ -125,11 +125,11 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   }
   // Checkpoints from before the growth rules (docs/METHOD.md §7, growth control) lack the per-view residual:
   // it is then re-measured at each view's next step.
-  if (!views.empty() && c.contains("trainer/view_starved")) {
+  if (!views.empty() && c.contains("trainer/view_seed_due")) {
     const uint64_t nv = views.size();
     trainer.view_static_unexplained = c.get<float>("trainer/view_static_unexplained", {nv});
     trainer.view_composite_unexplained = c.get<float>("trainer/view_composite_unexplained", {nv});
-    trainer.view_starved = c.get<int32_t>("trainer/view_starved", {nv});
+    trainer.view_seed_due = c.get<int32_t>("trainer/view_seed_due", {nv});
   }
   trainer.view_order = c.get<int32_t>("trainer/view_order");
   trainer.view_order_pos = c.metadata.at("view_order_pos").get<int64_t>();

@@ -34,8 +34,9 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     // NaN counts as unexplained: !(err < tol).
     const bool static_explains = static_err < 3.0f * tolerance;
     r.static_unexplained += !static_explains;
-    r.composite_unexplained += !(composite_err < 3.0f * tolerance);
-    if (mask) (*mask)[p] = !static_explains;
+    const bool composite_explains = composite_err < 3.0f * tolerance;
+    r.composite_unexplained += !composite_explains;
+    if (mask) (*mask)[p] = !static_explains && !composite_explains;
     if (penalize && static_explains) {
       penalty_sum += distractor.alpha[p];
       d_distractor_alpha[p] += weight;
@@ -43,6 +44,22 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
   }
   r.penalty = penalize ? double(lambda_explained) * penalty_sum / double(pixels) : 0.0;
   return r;
+}
+
+void erode_mask(std::vector<uint8_t>& mask, int width, int height) {
+  if (width < 0 || height < 0 || mask.size() != size_t(width) * size_t(height))
+    throw std::invalid_argument("erode_mask: mask size does not match the image");
+  const std::vector<uint8_t> in = mask;
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      uint8_t keep = in[size_t(y) * width + x];
+      for (int dy = -1; dy <= 1 && keep; ++dy)
+        for (int dx = -1; dx <= 1 && keep; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if (nx >= 0 && ny >= 0 && nx < width && ny < height && !in[size_t(ny) * width + nx]) keep = 0;
+        }
+      mask[size_t(y) * width + x] = keep;
+    }
 }
 
 }  // namespace desplat

@@ -24,6 +24,10 @@ struct Camera {
   // Camera center in world coordinates: −R_cwᵀ · t_cw.
   std::array<float, 3> center() const;
 
+  // The row-major index of the pixel world point x projects into (computed in double), or
+  // −1 when x is not in front of the camera (z ≤ 1e-6) or lands outside the image.
+  long long pixel_of(const std::array<float, 3>& x) const;
+
   // Throws std::invalid_argument naming the problem when the camera is unusable:
   // non-positive or non-finite focal length, non-positive image size, non-finite
   // principal point or pose.

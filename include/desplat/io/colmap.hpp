@@ -143,8 +143,9 @@ void write_model_text(const Model& model, const std::filesystem::path& dir);
 
 // Known model id, params.size() == num_params, all params finite, width > 0, height > 0.
 void check_camera(const Camera& camera);
-// Finite qvec with norm > 1e-12, finite tvec, non-empty name without NUL, finite
-// observation x, y, point3d_id ≥ −1.
+// Finite qvec with norm > 1e-12, finite tvec, non-empty name without NUL that is a relative
+// path with no '..' component (names become paths under the image and output folders),
+// finite observation x, y, point3d_id ≥ −1.
 void check_image(const Image& image);
 // Finite xyz.
 void check_point(const Point3D& point);

@@ -96,6 +96,10 @@ struct Scene {
   std::vector<std::array<float, 3>> points_xyz;    // [P] normalized frame
   std::vector<std::array<uint8_t, 3>> points_rgb;  // [P] 0..255
   std::vector<uint64_t> point_ids;                 // [P] COLMAP point3D ids, ascending
+  // [P] How many distinct images the point's track holds (used by the split or not), and
+  // which of `views` observe it (indices, ascending, each once).
+  std::vector<uint32_t> point_track_images;
+  std::vector<std::vector<uint32_t>> point_views;
   WorldNormalization normalization;    // normalized = (original − center)·scale
   int downscale = 1;
   std::filesystem::path cache_dir;     // absolute

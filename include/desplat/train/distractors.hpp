@@ -50,6 +50,11 @@ struct DistractorSettings {
   // A view whose buffer has fewer than one distractor per 256 pixels the static layer leaves
   // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
   bool reseed_starved_views = true;
+  // A view whose composite leaves over 1 % of its pixels unexplained and that has room under
+  // its cap is seeded where neither layer explains the pixel (interiors of such regions only, see erode_mask): densification
+  // grows distractors only where some already are, so an occluder no distractor reaches
+  // would otherwise stay unexplained, and the static layer would fit it.
+  bool seed_uncovered = true;
   // Distractor densification starts after this step (culling runs from the warm-up on), so
   // the static layer has had its chance at content few views see.
   int grow_after = 0;
@@ -93,7 +98,14 @@ int64_t distractor_growth_budget(size_t buffer_size, double static_unexplained_f
 // unexplained by the static layer and fewer than one distractor per 256 of them.
 bool distractor_buffer_starved(size_t buffer_size, double static_unexplained_fraction, int64_t pixels);
 
-// `count` new distractors for a starved view, one per pixel drawn (without replacement,
+// How many distractors seed_uncovered adds to a buffer of `buffer_size`: when the composite
+// leaves over 1 % of the view unexplained, one per pixels_per_distractor (4 when that is 0)
+// such pixels, counted at full training resolution (`pixels`), at most the cap's room
+// (distractor_growth_budget); else 0.
+int64_t uncovered_seed_count(size_t buffer_size, double static_unexplained_fraction,
+                             double composite_unexplained_fraction, int64_t pixels, const DistractorSettings& settings);
+
+// `count` new distractors for a starved or uncovered view, one per pixel drawn (without replacement,
 // in random order) from `mask` ([H·W] of `camera`, nonzero = unexplained), placed on the
 // initialization plane (depth init_depth) along that pixel's ray, with the target's colour
 // there (`target` [H·W·3]), the initial opacity, and a footprint of about

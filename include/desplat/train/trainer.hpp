@@ -19,6 +19,7 @@
 #include "desplat/raster/composite.hpp"
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
+#include "desplat/train/transient_points.hpp"
 #include "desplat/core/image.hpp"
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/raster/raster.hpp"
@@ -37,6 +38,10 @@ struct TrainingData {
   std::vector<TrainView> train, test;
   std::vector<std::array<float, 3>> points;     // normalized frame
   std::vector<std::array<uint8_t, 3>> colors;
+  // Optional, [points] or both empty: how many images each point's track holds, and which
+  // training views (indices into `train`) observe it (transient_points.hpp).
+  std::vector<uint32_t> point_track_images;
+  std::vector<std::vector<int32_t>> point_train_views;
   WorldNormalization normalization;
 };
 
@@ -52,6 +57,7 @@ struct TrainConfig {
   LearningRates lr;
   DensifySettings densify;
   DistractorSettings distractors;
+  TransientPointSettings transient_points;  // what initialization does with transient sparse points
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
   int random_init_points = 50000;  // used when the scene has no points
@@ -121,7 +127,7 @@ struct StepStats {
   RefineReport refine;
   RefineReport distractor_refine;   // summed over views when they were refined this step
   std::vector<ViewRefinement> distractor_refinements;  // per view, when they were refined
-  int64_t reseeded = 0;             // distractors added to this step's starved view
+  int64_t reseeded = 0;             // distractors seeded in this step's view (starved or uncovered)
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
 };
@@ -165,10 +171,17 @@ class Trainer {
   std::vector<int32_t> view_order;
   int64_t view_order_pos = 0;
   // Per training view, from its latest step (docs/METHOD.md §7, growth control): the fractions of pixels the
-  // static layer and the composite leave unexplained, and whether its buffer is starved.
+  // static layer and the composite leave unexplained, and whether its latest refinement
+  // found it starved or uncovered (seeded at its next step).
   std::vector<float> view_static_unexplained, view_composite_unexplained;
-  std::vector<int32_t> view_starved;
+  std::vector<int32_t> view_seed_due;
+  // Sparse points judged transient at initialization, and the distractors seeded from them
+  // (transient_points.hpp; 0 when the action is keep).
+  int64_t transient_point_count = 0, transient_seeded = 0;
   void set_step(int64_t s) { step_ = s; }
+  // The latest step's pixels neither layer explains [H·W of that step's camera]; after a step
+  // that seeded distractors, the eroded mask they were drawn from. For inspection.
+  const std::vector<uint8_t>& uncovered_mask() const { return uncovered_mask_; }
 
  private:
   const TrainingData& data_;
@@ -182,7 +195,7 @@ class Trainer {
   // Scratch reused every step.
   LayerPass static_pass_, distractor_pass_;
   std::vector<float> composite_, d_composite_;
-  std::vector<uint8_t> static_unexplained_mask_;
+  std::vector<uint8_t> uncovered_mask_;  // this step's pixels neither layer explains
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
@@ -190,9 +203,21 @@ class Trainer {
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
   void refine_all_distractors(int image_size, StepStats& stats);
-  // Re-seeds this step's view when its buffer is starved (docs/METHOD.md §7, growth control).
-  int64_t reseed_if_starved(int view, const Camera& camera, const FloatImage& target);
+  // Seeds this step's view when its latest refinement found it starved or uncovered and this
+  // step's residual agrees (docs/METHOD.md §7, growth control). Returns the count added.
+  int64_t seed_if_due(int view, const Camera& camera, const FloatImage& target);
+  // resolution_settled for this step, over one distractor-refinement period.
+  bool seeding_settled() const;
+  // TransientPointAction::seed: distractors where the transient points project in the
+  // training views that observe them.
+  void seed_from_transient_points(const std::vector<uint8_t>& transient);
 };
+
+// Whether step `step` trains at the same resolution as step − period (clamped at 0): the
+// distractor seeding rules wait one distractor-refinement period after a resolution switch,
+// because the residual right after it is the static layer's missing detail at the new
+// resolution, not a transient object (docs/METHOD.md §7, growth control).
+bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period);
 
 // Camera and image at 1/factor resolution (block average, sizes rounded down).
 Camera downscale_camera(const Camera& c, int factor);

@@ -24,11 +24,17 @@ struct ViewResidual {
 // Measures one step's residual. `statics` and `distractor` are the rendered layers (the
 // distractor layer may be empty), `composite` and `target` [P·3], `background` the step's.
 // With lambda_explained > 0 and a distractor layer, ADDS the penalty's gradient
-// λ_e/P · [explained] to d_distractor_alpha [P]. `static_unexplained_mask`, when not null,
-// is resized to [P] and set to 1 where the static layer leaves the pixel unexplained.
+// λ_e/P · [explained] to d_distractor_alpha [P]. `uncovered_mask`, when not null, is
+// resized to [P] and set to 1 where neither the static layer nor the composite explains the
+// pixel: what no Gaussian of either layer accounts for yet.
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
                                    std::span<const float> target, const std::array<float, 3>& background,
                                    float tolerance, float lambda_explained, std::span<float> d_distractor_alpha,
-                                   std::vector<uint8_t>* static_unexplained_mask = nullptr);
+                                   std::vector<uint8_t>* uncovered_mask = nullptr);
+
+// Keeps a set pixel of `mask` [height·width] only when its 8 neighbours inside the image
+// are set too (a 3×3 erosion): a transient object covers a connected area, while isolated
+// unexplained pixels are the static layer's fitting error (fine texture, edges).
+void erode_mask(std::vector<uint8_t>& mask, int width, int height);
 
 }  // namespace desplat

@@ -1,0 +1,44 @@
+// Which sparse points are on transient objects, and what initialization does with them
+// (docs/METHOD.md §5, transient points). SfM triangulates whatever two or more photos agree
+// on, so an object that stays for a few consecutive photos (a person, a hand) can leave
+// points that would start as static Gaussians.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "desplat/core/gaussians.hpp"
+
+namespace desplat {
+
+struct TrainingData;
+
+enum class TransientPointAction {
+  keep,  // every point starts a static Gaussian (the authors' behaviour)
+  drop,  // transient points are left out of the static initialization
+  seed,  // … and each becomes a distractor in every training view that observes it
+};
+std::string to_string(TransientPointAction action);
+// Throws std::invalid_argument naming the setting for anything but keep, drop or seed.
+TransientPointAction transient_point_action_from_string(const std::string& text);
+
+struct TransientPointSettings {
+  // drop measured best (docs/bench/issue17_ab.md, round 2); --preset paper and --static-only keep.
+  TransientPointAction action = TransientPointAction::drop;
+  // A point whose track holds fewer images than this is transient: an object that stays for
+  // one or two photos is in only those photos' tracks.
+  int min_track_images = 3;
+  // … or one whose colour at its projection in an observing training view differs from its
+  // own (COLMAP's mean over the track) by more than this, mean |Δ| over RGB in [0, 1] units:
+  // a point matched across photos that disagree is not one surface.
+  float color_tolerance = 0.25f;
+};
+
+// Per point of `data` (1 = transient), from data.point_track_images and data.point_train_views.
+// A point without track information (both vectors empty: data not from a COLMAP model) is
+// never transient. Colours are compared at the nearest pixel of the point's projection in each
+// observing training view, where it is in front of the camera and inside the image.
+std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& settings);
+
+}  // namespace desplat

@@ -1,0 +1,151 @@
+// Transient sparse points (docs/METHOD.md §5): the per-point rule against hand-computed
+// cases, the tracks the scene loader reports against the observations in images.bin (written
+// by COLMAP), and what each action does to the initialization.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "desplat/io/colmap.hpp"
+#include "desplat/train/train_config_json.hpp"
+#include "desplat/train/trainer.hpp"
+#include "desplat/train/transient_points.hpp"
+#include "support/expect.hpp"
+#include "support/projection.hpp"
+#include "support/scene_fixtures.hpp"
+#include "support/synthetic_views.hpp"
+
+namespace desplat {
+namespace {
+
+// A 4×4 view at the origin looking along +z, f = 4, principal point at the centre: the world
+// point (0, 0, 1) lands on pixel (2, 2). All grey 0.5, except `bright` at pixel (2, 2).
+TrainView tiny_view(float bright) {
+  TrainView v;
+  v.name = "v";
+  v.camera.width = v.camera.height = 4;
+  v.camera.fx = v.camera.fy = 4;
+  v.camera.cx = v.camera.cy = 2;
+  v.image = {4, 4, 3, std::vector<float>(48, 0.5f)};
+  for (int c = 0; c < 3; ++c) v.image.pixels[3 * (2 * 4 + 2) + c] = bright;
+  return v;
+}
+
+TEST(TransientPoints, ShortTracksAndDisagreeingColours) {
+  TrainingData d;
+  d.train = {tiny_view(0.5f), tiny_view(1.0f)};
+  const std::array<uint8_t, 3> grey{128, 128, 128};  // 0.502
+  // 0: 5 images, seen by view 0 (grey there): static.
+  // 1: 5 images, seen by views 0 and 1; view 1 is white there: |1 − 0.502| = 0.498 > 0.25.
+  // 2: a track of 2 images: transient whatever its colour.
+  // 3: behind the cameras, seen by view 1: no colour to compare, static.
+  // 4: projects outside the image (u = 4·3/1 + 2 = 14): static.
+  d.points = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, -1}, {3, 0, 1}};
+  d.colors = {grey, grey, grey, grey, grey};
+  d.point_track_images = {5, 5, 2, 5, 5};
+  d.point_train_views = {{0}, {0, 1}, {0}, {1}, {1}};
+  TransientPointSettings s;
+  EXPECT_EQ(transient_points(d, s), (std::vector<uint8_t>{0, 1, 1, 0, 0}));
+  s.min_track_images = 2;
+  EXPECT_EQ(transient_points(d, s), (std::vector<uint8_t>{0, 1, 0, 0, 0}));
+  s.color_tolerance = 0.5f;  // 0.498 is within it
+  EXPECT_EQ(transient_points(d, s), (std::vector<uint8_t>{0, 0, 0, 0, 0}));
+
+  // Without tracks (not from a COLMAP model) nothing is transient; half a track is an error.
+  TrainingData no_tracks = d;
+  no_tracks.point_track_images.clear();
+  no_tracks.point_train_views.clear();
+  EXPECT_EQ(transient_points(no_tracks, TransientPointSettings{}), std::vector<uint8_t>(5, 0));
+  no_tracks.point_track_images = {5};
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { transient_points(no_tracks, {}); }),
+                  "does not match the points");
+  TrainingData bad_view = d;
+  bad_view.point_train_views[0] = {7};
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { transient_points(bad_view, {}); }),
+                  "does not exist");
+}
+
+TEST(TransientPoints, ConfigNamesTheActionAndRejectsOthers) {
+  TrainConfig c;
+  c.transient_points.action = TransientPointAction::seed;
+  const nlohmann::json j = config_to_json(c);
+  EXPECT_EQ(j["init"]["transient_points"], "seed");
+  EXPECT_EQ(config_from_json(j).transient_points.action, TransientPointAction::seed);
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
+                      [] { config_from_json(nlohmann::json{{"init", {{"transient_points", "bury"}}}}); }),
+                  "init.transient_points must be keep, drop or seed");
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
+                      [] { config_from_json(nlohmann::json{{"init", {{"transient_points", 2}}}}); }),
+                  "init.transient_points must be a string");
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
+                      [] { config_from_json(nlohmann::json{{"init", {{"transient_min_track_images", -1}}}}); }),
+                  "init.transient_min_track_images");
+}
+
+TEST(TransientPoints, FoxTracksMatchTheObservationsInImagesBin) {
+  // The loader reads tracks from points3D.bin; the same facts, seen from images.bin: every
+  // observation with a 3D point names the image that sees it.
+  scene_test::Warnings w;
+  testing::TempDir cache("fox_tracks");
+  const Scene scene = load_colmap_scene(scene_test::kFox, scene_test::quiet_options(cache.path(), w));
+  const colmap::Model model = colmap::read_model(scene_test::kFox / "sparse/0");
+  std::map<uint64_t, std::set<uint32_t>> views_of_point;
+  for (size_t v = 0; v < scene.views.size(); ++v)
+    for (const colmap::Observation& o : model.images.at(scene.views[v].colmap_image_id).points2d)
+      if (o.point3d_id != colmap::kNoPoint3D) views_of_point[uint64_t(o.point3d_id)].insert(uint32_t(v));
+  ASSERT_EQ(scene.point_views.size(), scene.point_ids.size());
+  ASSERT_EQ(scene.point_track_images.size(), scene.point_ids.size());
+  size_t short_tracks = 0;
+  for (size_t i = 0; i < scene.point_ids.size(); ++i) {
+    const std::set<uint32_t>& expected = views_of_point[scene.point_ids[i]];
+    EXPECT_EQ(std::vector<uint32_t>(expected.begin(), expected.end()), scene.point_views[i]) << scene.point_ids[i];
+    EXPECT_EQ(scene.point_track_images[i], expected.size());  // every fox image is used by the default split
+    short_tracks += expected.size() < 3;
+  }
+  EXPECT_GT(short_tracks, 0u);  // COLMAP keeps two-image tracks: the rule has something to judge
+}
+
+TEST(TransientPoints, DropLeavesThePointOutAndSeedMovesItIntoItsView) {
+  // Point 0 gets a one-image track in training view 0; every other point is seen by all views.
+  TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
+  const size_t n = data.points.size();
+  data.point_track_images.assign(n, 8);
+  data.point_train_views.assign(n, {});
+  for (size_t i = 0; i < n; ++i)
+    for (int v = 0; v < int(data.train.size()); ++v) data.point_train_views[i].push_back(v);
+  data.point_track_images[0] = 1;
+  data.point_train_views[0] = {0};
+  // Where point 0 lands in view 0 (it must, for the seed test to mean anything).
+  const Camera& cam = data.train[0].camera;
+  const auto [u0, v0, z0] = test::project_point(cam, data.points[0]);
+  ASSERT_GT(z0, 0);
+  ASSERT_TRUE(u0 >= 0 && v0 >= 0 && u0 < 64 && v0 < 48);
+
+  std::map<TransientPointAction, std::pair<size_t, size_t>> sizes;  // static, view 0's distractors
+  for (const TransientPointAction a : {TransientPointAction::keep, TransientPointAction::drop, TransientPointAction::seed}) {
+    TrainConfig c;
+    c.transient_points.action = a;
+    c.transient_points.color_tolerance = 1.0f;  // only the track length decides here
+    c.distractors.initial_count = 50;
+    c.distractors.reference_pixels = 0;
+    c.threads = 1;
+    Trainer t(data, c);
+    sizes[a] = {t.gaussians().size(), t.distractors()[0].size()};
+    EXPECT_EQ(t.transient_point_count, a == TransientPointAction::keep ? 0 : 1);
+    if (a == TransientPointAction::seed) {
+      ASSERT_EQ(t.transient_seeded, 1);
+      const GaussianSet& d = t.distractors()[0].params;
+      const auto [u, v, z] = test::project_mean(cam, d, d.size() - 1);  // the seed is appended last
+      EXPECT_EQ(int(u), int(u0));
+      EXPECT_EQ(int(v), int(v0));
+      for (size_t w = 1; w < t.distractors().size(); ++w) EXPECT_EQ(t.distractors()[w].size(), 50u);
+    }
+  }
+  EXPECT_EQ(sizes[TransientPointAction::keep], (std::pair<size_t, size_t>{n, 50}));
+  EXPECT_EQ(sizes[TransientPointAction::drop], (std::pair<size_t, size_t>{n - 1, 50}));
+  EXPECT_EQ(sizes[TransientPointAction::seed], (std::pair<size_t, size_t>{n - 1, 51}));
+}
+
+}  // namespace
+}  // namespace desplat
