@@ -6,6 +6,7 @@
 
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/train/presets.hpp"
+#include "range_checks.hpp"
 #include "split_options.hpp"
 #include "stop_signal.hpp"
 
@@ -28,29 +29,30 @@ int main(int argc, char** argv) {
                  "starting settings: default (what measures best) or paper (the authors' exact behaviour); "
                  "--config applies on top")
       ->check(CLI::IsMember(desplat::preset_names()));
-  app.add_option("--iterations", o.iterations, "training steps (default 30000)")->check(CLI::PositiveNumber);
+  app.add_option("--iterations", o.iterations, "training steps (default 30000)")
+      ->check(desplat::apps::integer_in(1, INT64_MAX));
   app.add_option("--seed", o.seed, "random seed (default 0)");
-  app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(desplat::apps::integer_in(0, 4096));
   app.add_flag("--static-only", o.static_only,
                "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
   app.add_option("--distractors-per-view", o.distractors_per_view,
                  "exactly N initial distractor Gaussians per training view (default: 1000 per 504x378 "
                  "pixels, the paper's density, scaled with the training image size)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(desplat::apps::integer_in(0, 10000000));
   app.add_flag("--no-distractor-density", o.no_distractor_density,
                "ablation: never split/duplicate/cull distractors");
   app.add_flag("--no-regularization", o.no_regularization, "ablation: drop the two opacity regularizers");
   app.add_flag("--resume", o.resume, "continue from --out/checkpoint.ckpt");
   app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
-      ->check(CLI::PositiveNumber)->capture_default_str();
+      ->check(desplat::apps::integer_in(1, 64))->capture_default_str();
   std::string split_rule = "every-nth";
   desplat::apps::add_split_options(app, o.split, split_rule);
   app.add_option("--eval-every", o.eval_every, "evaluate test views every N steps (0: only at the end)")
-      ->capture_default_str();
+      ->check(desplat::apps::integer_in(0, INT32_MAX))->capture_default_str();
   app.add_option("--checkpoint-every", o.checkpoint_every, "write a checkpoint every N steps (0: only at the end)")
-      ->capture_default_str();
+      ->check(desplat::apps::integer_in(0, INT32_MAX))->capture_default_str();
   app.add_option("--log-every", o.log_every, "when not on a terminal, print a progress line every N steps")
-      ->capture_default_str();
+      ->check(desplat::apps::integer_in(1, INT32_MAX))->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (o.data_dir.empty() && o.images_dir.empty()) {
     std::fprintf(stderr, "desplat_train: give --data DIR (COLMAP scene) or --images DIR (photos)\n");

@@ -201,6 +201,20 @@ TEST_F(TrainApp, BadInputGivesOneClearError) {
   r = run(train() + " --out " + (root_ / "o3").string() + " --resume");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no checkpoint"), std::string::npos) << r.output;
+  // A setting that would divide by zero, and options out of range: one line each, nothing trained.
+  std::ofstream(cfg) << R"({"resolution_schedule": 0})";
+  r = run(train() + " --out " + (root_ / "o4").string() + " --config " + cfg.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("resolution_schedule must be at least 1 (got 0)"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(root_ / "o4" / "checkpoint.ckpt"));
+  for (const auto& [option, message] : {std::pair{"--iterations 0", "--iterations: must be at least 1 (got 0)"},
+                                        {"--checkpoint-every -3", "--checkpoint-every: must be at least 0 (got -3)"},
+                                        {"--eval-every -1", "--eval-every: must be at least 0 (got -1)"},
+                                        {"--downscale 1000", "--downscale: must be an integer in 1..64 (got 1000)"}}) {
+    r = run(train() + " --out " + (root_ / "o5").string() + " " + option);
+    EXPECT_NE(r.exit_code, 0) << option;
+    EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
+  }
 }
 
 }  // namespace

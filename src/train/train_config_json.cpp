@@ -2,6 +2,8 @@
 // in exactly one place.
 #include "desplat/train/train_config_json.hpp"
 
+#include <cmath>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <variant>
@@ -109,6 +111,75 @@ void collect_leaves(const nlohmann::json& j, const std::string& prefix, std::vec
 
 }  // namespace
 
+namespace {
+
+// `value` must be finite and in [lo, hi], or (lo, hi] when lo_open; else one error naming
+// the setting, what is allowed and what it got.
+void require(const char* name, double value, double lo, double hi, bool lo_open, const char* allowed) {
+  if (std::isfinite(value) && value >= lo && value <= hi && !(lo_open && value == lo)) return;
+  std::ostringstream got;
+  got << value;
+  throw std::invalid_argument(std::string("config: ") + name + " must be " + allowed + " (got " + got.str() + ")");
+}
+
+constexpr double kBig = 1e18;
+
+}  // namespace
+
+void validate_config(const TrainConfig& c) {
+  // Counts and intervals: several are divisors or moduli, so 0 would crash the run.
+  require("iterations", double(c.iterations), 1, kBig, false, "at least 1");
+  require("sh_degree", c.sh_degree, 0, 3, false, "0, 1, 2 or 3");
+  require("sh_degree_interval", c.sh_degree_interval, 1, kBig, false, "at least 1");
+  require("num_downscales", c.num_downscales, 0, 10, false, "0..10");
+  require("resolution_schedule", c.resolution_schedule, 1, kBig, false, "at least 1");
+  require("means_lr_decay_steps", double(c.means_lr_decay_steps), 1, kBig, false, "at least 1");
+  require("densify.warmup", c.densify.warmup, 0, kBig, false, "≥ 0");
+  require("densify.refine_every", c.densify.refine_every, 1, kBig, false, "at least 1");
+  require("densify.reset_alpha_every", c.densify.reset_alpha_every, 1, kBig, false, "at least 1");
+  require("densify.stop_split_at", c.densify.stop_split_at, 0, kBig, false, "≥ 0");
+  require("densify.stop_screen_size_at", c.densify.stop_screen_size_at, 0, kBig, false, "≥ 0");
+  require("densify.split_samples", c.densify.split_samples, 1, 64, false, "1..64");
+  require("distractors.initial_count", c.distractors.initial_count, 0, 1e7, false, "0..10,000,000");
+  require("distractors.reference_pixels", c.distractors.reference_pixels, 0, kBig, false, "≥ 0");
+  require("distractors.refine_every_epochs", c.distractors.refine_every_epochs, 1, kBig, false, "at least 1");
+  require("distractors.pixels_per_distractor", c.distractors.pixels_per_distractor, 0, kBig, false, "≥ 0");
+  require("distractors.grow_after", c.distractors.grow_after, 0, kBig, false, "≥ 0");
+  require("init.transient_min_track_images", c.transient_points.min_track_images, 0, kBig, false, "≥ 0");
+  require("random_init_points", c.random_init_points, 1, 1e8, false, "1..100,000,000");
+  require("threads", c.threads, 0, 4096, false, "0 (all cores) or a positive count");
+  // Rates: the means' rate decays on a log scale, so it and its final value must be > 0.
+  require("lr.means", c.lr.means, 0, kBig, true, "> 0");
+  require("means_lr_final", c.means_lr_final, 0, kBig, true, "> 0");
+  const std::pair<const char*, float> rates[] = {
+      {"lr.log_scales", c.lr.log_scales}, {"lr.quats", c.lr.quats}, {"lr.opacity_logits", c.lr.opacity_logits},
+      {"lr.sh_dc", c.lr.colors_dc}, {"lr.sh_rest", c.lr.colors_rest},
+      {"distractors.lr.means", c.distractors.lr.means}, {"distractors.lr.log_scales", c.distractors.lr.log_scales},
+      {"distractors.lr.quats", c.distractors.lr.quats},
+      {"distractors.lr.opacity_logits", c.distractors.lr.opacity_logits},
+      {"distractors.lr.rgb", c.distractors.lr.colors_dc}};
+  for (const auto& [name, rate] : rates) require(name, rate, 0, kBig, false, "≥ 0 (0 freezes the group)");
+  // Weights, thresholds and sizes.
+  require("ssim_lambda", c.ssim_lambda, 0, 1, false, "in [0, 1]");
+  require("densify.grad_threshold", c.densify.grad_threshold, 0, kBig, true, "> 0");
+  require("densify.size_threshold", c.densify.size_threshold, 0, kBig, true, "> 0");
+  require("densify.split_screen_size", c.densify.split_screen_size, 0, kBig, true, "> 0");
+  require("densify.split_scale_factor", c.densify.split_scale_factor, 0, kBig, true, "> 0");
+  require("densify.cull_alpha", c.densify.cull_alpha, 0, 1, false, "in [0, 1]");
+  require("densify.cull_scale", c.densify.cull_scale, 0, kBig, true, "> 0");
+  require("densify.cull_screen_size", c.densify.cull_screen_size, 0, kBig, true, "> 0");
+  require("distractors.init_depth", c.distractors.init_depth, 0, kBig, true, "> 0");
+  require("distractors.init_half_width", c.distractors.init_half_width, 0, kBig, true, "> 0");
+  require("distractors.init_opacity", c.distractors.init_opacity, 0, 0.999, true, "in (0, 0.999]");
+  require("distractors.lambda_static", c.distractors.lambda_static, 0, kBig, false, "≥ 0");
+  require("distractors.lambda_distractor", c.distractors.lambda_distractor, 0, kBig, false, "≥ 0");
+  require("distractors.explained_tolerance", c.distractors.explained_tolerance, 0, kBig, true, "> 0");
+  require("distractors.lambda_explained", c.distractors.lambda_explained, 0, kBig, false, "≥ 0");
+  require("init.transient_color_tolerance", c.transient_points.color_tolerance, 0, kBig, false, "≥ 0");
+  require("random_init_extent", c.random_init_extent, 0, kBig, true, "> 0");
+  for (const float b : c.eval_background) require("eval_background", b, 0, 1, false, "three values in [0, 1]");
+}
+
 nlohmann::json config_to_json(const TrainConfig& c) {
   TrainConfig copy = c;
   nlohmann::json j = nlohmann::json::object();
@@ -135,20 +206,7 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
       throw std::invalid_argument(std::string("config: setting '") + e.name + "' has the wrong type (" + ex.what() + ")");
     }
   }
-  if (base.iterations < 1) throw std::invalid_argument("config: iterations must be at least 1");
-  if (base.sh_degree < 0 || base.sh_degree > 3) throw std::invalid_argument("config: sh_degree must be 0..3");
-  if (base.distractors.initial_count < 0 || base.distractors.reference_pixels < 0)
-    throw std::invalid_argument("config: distractors.initial_count and distractors.reference_pixels must be ≥ 0");
-  if (base.distractors.refine_every_epochs < 1)
-    throw std::invalid_argument("config: distractors.refine_every_epochs must be at least 1");
-  if (!(base.distractors.lambda_static >= 0) || !(base.distractors.lambda_distractor >= 0))
-    throw std::invalid_argument("config: distractors.lambda_static and lambda_distractor must be ≥ 0");
-  if (!(base.distractors.explained_tolerance > 0) || !(base.distractors.lambda_explained >= 0))
-    throw std::invalid_argument("config: distractors.explained_tolerance must be > 0 and lambda_explained ≥ 0");
-  if (base.transient_points.min_track_images < 0 || !(base.transient_points.color_tolerance >= 0))
-    throw std::invalid_argument("config: init.transient_min_track_images and init.transient_color_tolerance must be ≥ 0");
-  if (base.distractors.pixels_per_distractor < 0 || base.distractors.grow_after < 0)
-    throw std::invalid_argument("config: distractors.pixels_per_distractor and grow_after must be ≥ 0");
+  validate_config(base);
   return base;
 }
 

@@ -1,0 +1,60 @@
+// Every setting of config.json out of its range is one error naming the setting, what is
+// allowed and the value (issue 18's catalogue: SIGFPE on zero intervals, silently useless
+// rates and sizes). The defaults and both presets are valid.
+#include <gtest/gtest.h>
+
+#include <limits>
+
+#include "desplat/train/presets.hpp"
+#include "desplat/train/train_config_json.hpp"
+#include "support/expect.hpp"
+
+namespace desplat {
+namespace {
+
+std::string error_for(const nlohmann::json& j) {
+  return testing::error_of<std::invalid_argument>([&] { config_from_json(j); });
+}
+
+TEST(ConfigErrors, DefaultsAndPresetsAreValid) {
+  for (const std::string& name : preset_names()) EXPECT_NO_THROW(validate_config(preset_config(name))) << name;
+  EXPECT_NO_THROW(config_from_json(config_to_json(TrainConfig{})));  // a run's own config.json reads back
+}
+
+TEST(ConfigErrors, ZeroIntervalsThatWouldDivideByZero) {
+  EXPECT_CONTAINS(error_for({{"resolution_schedule", 0}}), "config: resolution_schedule must be at least 1 (got 0)");
+  EXPECT_CONTAINS(error_for({{"sh_degree_interval", 0}}), "config: sh_degree_interval must be at least 1 (got 0)");
+  EXPECT_CONTAINS(error_for({{"densify", {{"refine_every", 0}, {"warmup", 0}}}}),
+                  "config: densify.refine_every must be at least 1 (got 0)");
+  EXPECT_CONTAINS(error_for({{"densify", {{"reset_alpha_every", 0}}}}), "densify.reset_alpha_every must be at least 1");
+  EXPECT_CONTAINS(error_for({{"means_lr_decay_steps", 0}}), "means_lr_decay_steps must be at least 1");
+}
+
+TEST(ConfigErrors, UselessRatesAndSizes) {
+  EXPECT_CONTAINS(error_for({{"lr", {{"means", 0}}}}), "config: lr.means must be > 0 (got 0)");
+  EXPECT_CONTAINS(error_for({{"lr", {{"means", -1e-4}}}}), "lr.means must be > 0 (got -0.0001)");
+  EXPECT_CONTAINS(error_for({{"means_lr_final", -1e-6}}), "means_lr_final must be > 0");
+  EXPECT_CONTAINS(error_for({{"lr", {{"quats", -1}}}}), "lr.quats must be ≥ 0 (0 freezes the group) (got -1)");
+  EXPECT_CONTAINS(error_for({{"ssim_lambda", 5}}), "config: ssim_lambda must be in [0, 1] (got 5)");
+  EXPECT_CONTAINS(error_for({{"num_downscales", -3}}), "config: num_downscales must be 0..10 (got -3)");
+  EXPECT_CONTAINS(error_for({{"random_init_points", 0}}), "config: random_init_points must be 1..100,000,000 (got 0)");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"init_opacity", 1.0}}}}), "distractors.init_opacity must be in (0, 0.999]");
+  EXPECT_CONTAINS(error_for({{"eval_background", {0.1, 2.0, 0.2}}}), "eval_background must be three values in [0, 1] (got 2)");
+  EXPECT_CONTAINS(error_for({{"threads", -2}}), "threads must be 0 (all cores) or a positive count (got -2)");
+  // Zero where zero is meaningful stays allowed: a frozen group, no regularizer, no cap.
+  EXPECT_NO_THROW(config_from_json({{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
+}
+
+TEST(ConfigErrors, NonFiniteValuesAreRefusedWhateverTheSetting) {
+  TrainConfig c;
+  c.densify.grad_threshold = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { validate_config(c); }),
+                  "densify.grad_threshold must be > 0 (got nan)");
+  c = TrainConfig{};
+  c.distractors.lambda_distractor = std::numeric_limits<float>::infinity();
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { validate_config(c); }),
+                  "distractors.lambda_distractor must be ≥ 0 (got inf)");
+}
+
+}  // namespace
+}  // namespace desplat
