@@ -188,6 +188,18 @@ TEST_F(TrainApp, InterruptWritesCheckpointAndResumeFinishes) {
   EXPECT_TRUE(fs::exists(out / "metrics.json"));
 }
 
+TEST_F(TrainApp, NoTestViewsIsSaidNotScoredAsZero) {
+  const fs::path out = root_ / "all_train";
+  const Outcome r = run(train() + " --out " + out.string() + " --iterations 5 --threads 2 --split all-train");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("no test views to score"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("test PSNR 0.00"), std::string::npos) << r.output;
+  nlohmann::json metrics;
+  std::ifstream(out / "metrics.json") >> metrics;
+  EXPECT_TRUE(metrics["mean_psnr"].is_null());
+  EXPECT_EQ(metrics["count"], 0);
+}
+
 TEST_F(TrainApp, BadInputGivesOneClearError) {
   Outcome r = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root_ / "nope").string() + " --out " +
               (root_ / "o1").string());

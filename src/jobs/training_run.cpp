@@ -82,6 +82,12 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+std::string fixed(double v, int decimals) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.*f", decimals, v);
+  return text;
+}
+
 json metrics_json(const std::vector<ViewMetrics>& m) {
   json per = json::array();
   double psnr_sum = 0, ssim_sum = 0;
@@ -89,7 +95,9 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
     per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}});
     psnr_sum += v.psnr, ssim_sum += v.ssim;
   }
-  const double n = std::max<size_t>(1, m.size());
+  // Without test views there is no mean: null, not a PSNR of 0.
+  if (m.empty()) return {{"views", per}, {"mean_psnr", nullptr}, {"mean_ssim", nullptr}, {"count", 0}};
+  const double n = double(m.size());
   return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
 }
 
@@ -371,9 +379,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"distractor_share", median(dist_share)},
                                                      {"steps_measured", t_fwd.size()}};
   model.write_metrics(metrics);
-  std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; test PSNR %.2f dB, SSIM %.4f\n",
-              (long long)trainer.current_step(), format_duration(wall).c_str(), trainer.gaussians().size(),
-              trainer.distractor_count(), metrics["mean_psnr"].get<double>(), metrics["mean_ssim"].get<double>());
+  const std::string scores =
+      final_metrics.empty() ? std::string("no test views to score (the split left none)")
+                            : "test PSNR " + fixed(metrics["mean_psnr"].get<double>(), 2) + " dB, SSIM " +
+                                  fixed(metrics["mean_ssim"].get<double>(), 4);
+  std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; %s\n", (long long)trainer.current_step(),
+              format_duration(wall).c_str(), trainer.gaussians().size(), trainer.distractor_count(), scores.c_str());
   if (!masks.views.empty())
     std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
                 masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
