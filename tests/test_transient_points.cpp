@@ -142,6 +142,16 @@ TEST(TransientPoints, DropLeavesThePointOutAndSeedMovesItIntoItsView) {
       for (size_t w = 1; w < t.distractors().size(); ++w) EXPECT_EQ(t.distractors()[w].size(), 50u);
     }
   }
+  // Without distractors the model is the Splatfacto baseline: every point, whatever the action.
+  TrainConfig baseline;
+  baseline.distractors.enabled = false;
+  baseline.transient_points.action = TransientPointAction::drop;
+  baseline.threads = 1;
+  const Trainer static_only(data, baseline);
+  EXPECT_EQ(static_only.gaussians().size(), n);
+  EXPECT_EQ(static_only.transient_point_count, 0);
+  EXPECT_EQ(static_only.config().transient_points.action, TransientPointAction::keep);
+
   EXPECT_EQ(sizes[TransientPointAction::keep], (std::pair<size_t, size_t>{n, 50}));
   EXPECT_EQ(sizes[TransientPointAction::drop], (std::pair<size_t, size_t>{n - 1, 50}));
   EXPECT_EQ(sizes[TransientPointAction::seed], (std::pair<size_t, size_t>{n - 1, 51}));

@@ -15,6 +15,16 @@ std::array<float, 3> Camera::center() const {
           -(R[2] * t_cw[0] + R[5] * t_cw[1] + R[8] * t_cw[2])};
 }
 
+std::array<float, 3> Camera::to_world(const std::array<double, 3>& p_cam) const {
+  std::array<float, 3> w{};
+  for (int k = 0; k < 3; ++k) {
+    double v = 0;
+    for (int r = 0; r < 3; ++r) v += double(R_cw[3 * r + k]) * (p_cam[r] - double(t_cw[r]));
+    w[k] = float(v);
+  }
+  return w;
+}
+
 long long Camera::pixel_of(const std::array<float, 3>& x) const {
   double p[3];
   for (int r = 0; r < 3; ++r)

@@ -220,9 +220,6 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
 
   TrainConfig config = preset_config(opt.preset);
-  // --static-only is the Splatfacto baseline: every sparse point starts a static Gaussian
-  // (a --config may still ask otherwise).
-  if (opt.static_only) config.transient_points.action = TransientPointAction::keep;
   if (!opt.config_file.empty()) {
     std::ifstream f(opt.config_file);
     if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
@@ -285,9 +282,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 (long long)full_resolution_from, (long long)config.iterations);
 
   const json run_json = {{"static_only", opt.static_only}, {"preset", opt.preset}};
-  model.write_config({config, recipe, run_json});
-
   Trainer trainer(data, config);
+  // The trainer's configuration is the effective one (e.g. a static-only model keeps every
+  // sparse point): that is what config.json records.
+  config = trainer.config();
+  model.write_config({config, recipe, run_json});
   if (config.transient_points.action != TransientPointAction::keep)
     std::printf("transient sparse points (%s): %lld of %zu, %lld distractors seeded from them\n",
                 to_string(config.transient_points.action).c_str(), (long long)trainer.transient_point_count,

@@ -27,13 +27,8 @@ GaussianSet init_distractors(const Camera& cam, const DistractorSettings& s, uin
   const size_t n = size_t(distractor_count_for(cam, s));
   std::vector<std::array<float, 3>> world(n);
   for (size_t i = 0; i < n; ++i) {
-    const double pc[3] = {plane(rng), plane(rng), s.init_depth};
-    // x_world = Rᵀ (x_cam − t), with R row-major world→camera.
-    for (int k = 0; k < 3; ++k) {
-      double v = 0;
-      for (int r = 0; r < 3; ++r) v += cam.R_cw[3 * r + k] * (pc[r] - cam.t_cw[r]);
-      world[i][k] = float(v);
-    }
+    const double x = plane(rng), y = plane(rng);  // in this order: the seed's sequence stays as it was
+    world[i] = cam.to_world({x, y, s.init_depth});
   }
   GaussianSet g;
   g.color_mode = ColorMode::RGB;
@@ -113,13 +108,9 @@ GaussianSet reseed_distractors(const Camera& cam, std::span<const uint8_t> mask,
   for (size_t i = 0; i < candidates.size(); ++i) {
     const size_t p = candidates[i];
     const double u = double(p % cam.width) + 0.5, v = double(p / cam.width) + 0.5;
-    const double pc[3] = {(u - cam.cx) / cam.fx * s.init_depth, (v - cam.cy) / cam.fy * s.init_depth, s.init_depth};
-    for (int k = 0; k < 3; ++k) {
-      double w = 0;  // x_world = Rᵀ (x_cam − t), with R row-major world→camera
-      for (int r = 0; r < 3; ++r) w += cam.R_cw[3 * r + k] * (pc[r] - cam.t_cw[r]);
-      g.means[3 * i + k] = float(w);
-      g.log_scales[3 * i + k] = log_scale;
-    }
+    const std::array<float, 3> w =
+        cam.to_world({(u - cam.cx) / cam.fx * s.init_depth, (v - cam.cy) / cam.fy * s.init_depth, s.init_depth});
+    for (int k = 0; k < 3; ++k) g.means[3 * i + k] = w[k], g.log_scales[3 * i + k] = log_scale;
     const std::array<float, 4> q = random_unit_quaternion(rng, normal);
     for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k];
     g.opacity_logits[i] = opacity_logit;

@@ -81,6 +81,9 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
+  // Transient points are DeSplat's: without distractors the model is the Splatfacto
+  // baseline (--static-only, the bench's static-only runs) and starts from every point.
+  if (!config_.distractors.enabled) config_.transient_points.action = TransientPointAction::keep;
   std::vector<uint8_t> transient;
   if (config_.transient_points.action != TransientPointAction::keep) {
     transient = transient_points(data_, config_.transient_points);

@@ -18,7 +18,7 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
   const bool penalize = lambda_explained > 0 && has_distractor;
   if (penalize && (distractor.alpha.size() != pixels || d_distractor_alpha.size() != pixels))
     throw std::invalid_argument("measure_view_residual: distractor layer size differs");
-  if (mask) mask->assign(pixels, 0);
+  if (mask) mask->resize(pixels);  // every pixel is written below
   ViewResidual r;
   r.pixels = int64_t(pixels);
   const float weight = penalize ? lambda_explained / float(pixels) : 0.0f;

@@ -24,6 +24,9 @@ struct Camera {
   // Camera center in world coordinates: −R_cwᵀ · t_cw.
   std::array<float, 3> center() const;
 
+  // The world point at camera-space position p_cam: R_cwᵀ · (p_cam − t_cw) (computed in double).
+  std::array<float, 3> to_world(const std::array<double, 3>& p_cam) const;
+
   // The row-major index of the pixel world point x projects into (computed in double), or
   // −1 when x is not in front of the camera (z ≤ 1e-6) or lands outside the image.
   long long pixel_of(const std::array<float, 3>& x) const;

@@ -24,7 +24,8 @@ std::string to_string(TransientPointAction action);
 TransientPointAction transient_point_action_from_string(const std::string& text);
 
 struct TransientPointSettings {
-  // drop measured best (docs/bench/issue17_ab.md, round 2); --preset paper and --static-only keep.
+  // drop measured best (docs/bench/issue17_ab.md, round 2); --preset paper keeps, and the
+  // Trainer keeps every point when distractors are off (the Splatfacto baseline).
   TransientPointAction action = TransientPointAction::drop;
   // A point whose track holds fewer images than this is transient: an object that stays for
   // one or two photos is in only those photos' tracks.
@@ -37,7 +38,7 @@ struct TransientPointSettings {
 
 // Per point of `data` (1 = transient), from data.point_track_images and data.point_train_views.
 // A point without track information (both vectors empty: data not from a COLMAP model) is
-// never transient. Colours are compared at the nearest pixel of the point's projection in each
+// never transient. Colours are compared at the pixel the point projects into (Camera::pixel_of) in each
 // observing training view, where it is in front of the camera and inside the image.
 std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& settings);
 
