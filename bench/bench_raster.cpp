@@ -3,7 +3,9 @@
 //     frustum of a 512×384 camera, depths 2–10, world sizes 0.005–0.035 (about
 //     0.2–7 px on screen), SH degree 3;
 //   * fox: the 12,421-point COLMAP model of ../shared/data/fox initialized as in
-//     training (docs/METHOD.md §5), seen from its first camera at 540×960.
+//     training (docs/METHOD.md §5), seen from its first camera at 540×960;
+//   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
+//     the same camera: the workload of a late training step.
 // Counters: pairs = Gaussian–pixel pairs whose α was evaluated per call;
 // time_per_pair = wall time per evaluated pair.
 #include <benchmark/benchmark.h>
@@ -12,10 +14,12 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <random>
 
 #include "desplat/io/colmap.hpp"
+#include "desplat/io/ply.hpp"
 #include "desplat/train/init.hpp"
 #include "desplat/raster/raster.hpp"
 
@@ -104,17 +108,36 @@ Scene fox_scene() {
   return s;
 }
 
+// A trained model (a desplat_train point_cloud.ply of the fox, in the same normalized
+// frame) from the environment variable DESPLAT_BENCH_PLY, seen from the fox's first camera:
+// the pixel workload of a late training step. Empty when the variable is not set.
+Scene trained_fox_scene() {
+  const char* ply = std::getenv("DESPLAT_BENCH_PLY");
+  Scene s = fox_scene();
+  if (!ply) return Scene{};
+  s.gaussians = read_gaussian_ply(ply);
+  return s;
+}
+
 const Scene& scene_for(int64_t id) {
   static const Scene s100k = frustum_scene(100000);
   static const Scene s500k = frustum_scene(500000);
   if (id == 100000) return s100k;
   if (id == 500000) return s500k;
+  if (id == 1) {
+    static const Scene trained = trained_fox_scene();
+    return trained;
+  }
   static const Scene fox = fox_scene();
   return fox;
 }
 
 void run(benchmark::State& state, bool backward) {
   const Scene& scene = scene_for(state.range(0));
+  if (scene.gaussians.size() == 0) {
+    state.SkipWithError("set DESPLAT_BENCH_PLY to a trained fox point_cloud.ply for scene 1");
+    return;
+  }
   RasterSettings settings;
   settings.num_threads = static_cast<int>(state.range(1));
   RasterOutput out;
@@ -138,9 +161,10 @@ void run(benchmark::State& state, bool backward) {
 void BM_Forward(benchmark::State& state) { run(state, false); }
 void BM_ForwardBackward(benchmark::State& state) { run(state, true); }
 
-// range(0): 100000 / 500000 random Gaussians, 0 = fox; range(1): threads.
+// range(0): 100000 / 500000 random Gaussians, 0 = fox at initialization, 1 = a trained
+// fox (DESPLAT_BENCH_PLY); range(1): threads.
 void args(benchmark::internal::Benchmark* b) {
-  for (int64_t scene : {100000, 500000, 0})
+  for (int64_t scene : {100000, 500000, 0, 1})
     for (int64_t threads : {1, 2}) b->Args({scene, threads});
   b->ArgNames({"scene", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 }

@@ -114,5 +114,51 @@ TEST(Forward, PerGaussianOutputsDescribeTheProjection) {
   EXPECT_GT(visible, 10);
 }
 
+// The tiles and rows a Gaussian is blended in come from its opacity (blend_radii): every
+// pixel where o·e^−σ reaches 1/255, computed here in double from the conic, must lie
+// inside that box, and the box never exceeds the 3.33σ one. Opacities span 10⁻³…1, so some
+// Gaussians can reach α = 1/255 nowhere (zero box) and the rest have boxes from ~0 to 3.33σ.
+TEST(Forward, OpacityExtentCoversEveryPixelWhereAlphaReachesTheCutoff) {
+  std::mt19937 rng(11);
+  const Camera cam = random_camera(rng, 64, 48, 50);
+  SceneSpec spec;
+  spec.count = 400;
+  GaussianSet g = random_gaussians(rng, spec);
+  std::uniform_real_distribution<float> log_o(std::log(1e-3f), 0.0f);
+  for (float& logit : g.opacity_logits) {
+    const float o = std::min(std::exp(log_o(rng)), 0.9999f);
+    logit = std::log(o / (1 - o));
+  }
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, RasterSettings{}, out);
+  int checked = 0, never = 0, narrower = 0;
+  for (int i = 0; i < spec.count; ++i) {
+    if (!out.visible[i]) continue;
+    EXPECT_LE(out.blend_radii[2 * i], out.radii[2 * i]);
+    EXPECT_LE(out.blend_radii[2 * i + 1], out.radii[2 * i + 1]);
+    const double o = out.opacity[i];
+    if (o < 0.98 / 255) {  // clearly below the cutoff (the kernel keeps a 1 % margin)
+      EXPECT_EQ(out.blend_radii[2 * i], 0) << "Gaussian " << i << " can never reach the cutoff";
+      ++never;
+      continue;
+    }
+    narrower += out.blend_radii[2 * i] < out.radii[2 * i];
+    const double a = out.conics[3 * i], b = out.conics[3 * i + 1], c = out.conics[3 * i + 2];
+    const double mx = out.means2d[2 * i], my = out.means2d[2 * i + 1];
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const double dx = mx - (x + 0.5), dy = my - (y + 0.5);
+        const double sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+        if (o * std::exp(-sigma) < 1.0 / 255) continue;
+        ++checked;
+        EXPECT_LE(std::abs(dx), out.blend_radii[2 * i]) << "Gaussian " << i << " pixel " << x << "," << y;
+        EXPECT_LE(std::abs(dy), out.blend_radii[2 * i + 1]) << "Gaussian " << i << " pixel " << x << "," << y;
+      }
+  }
+  EXPECT_GT(checked, 1000);
+  EXPECT_GT(never, 5);
+  EXPECT_GT(narrower, 50);
+}
+
 }  // namespace
 }  // namespace desplat::test

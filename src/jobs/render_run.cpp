@@ -85,7 +85,8 @@ int run_render(const RenderRunOptions& o) {
 
   RasterSettings rs;
   rs.num_threads = o.threads;
-  rs.active_sh_degree = statics.sh_degree;
+  // The degree training ended at (a run stopped early has not trained the higher bands).
+  rs.active_sh_degree = std::min(statics.sh_degree, train.sh_degree_at(ckpt.metadata.value("step", int64_t(0))));
   int written = 0;
   for (size_t i : chosen) {
     const SceneView& view = scene.views[i];

@@ -302,6 +302,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
                                      [](const SceneView& v) { return !v.mask_path.empty(); });
   std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
+  std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
   const int64_t first = trainer.current_step();
@@ -320,6 +321,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
       t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
       dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
+      const double n_pairs = double(std::max<int64_t>(1, s.static_pairs));
+      pairs.push_back(double(s.static_pairs));
+      ns_forward.push_back(1e9 * s.timings.forward / n_pairs);
+      ns_forward_backward.push_back(1e9 * (s.timings.forward + s.timings.backward) / n_pairs);
+      visible_share.push_back(double(s.static_visible) / double(std::max<size_t>(1, s.gaussians)));
     }
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
@@ -376,7 +382,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"distractor_branch", median(t_dist)},
                                                      {"total", median(t_total)},
                                                      {"distractor_share", median(dist_share)},
-                                                     {"steps_measured", t_fwd.size()}};
+                                                     {"steps_measured", t_fwd.size()},
+                                                     // the static layer's render:
+                                                     {"pairs", median(pairs)},
+                                                     {"ns_per_pair_forward", median(ns_forward)},
+                                                     {"ns_per_pair_forward_backward", median(ns_forward_backward)},
+                                                     {"visible_share", median(visible_share)}};
   model.write_metrics(metrics);
   const std::string scores =
       final_metrics.empty() ? std::string("no test views to score (the split left none)")

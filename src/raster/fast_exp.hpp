@@ -8,6 +8,8 @@
 #include <bit>
 #include <cstdint>
 
+#include "raster/stage_math.hpp"
+
 namespace desplat::raster {
 
 inline float fast_exp_nonpositive(float x) {
@@ -18,16 +20,18 @@ inline float fast_exp_nonpositive(float x) {
   x = x < -87.0f ? -87.0f : x;
   // Round to nearest by adding and removing 1.5·2²³ (no libm call, so it vectorizes).
   constexpr float kRoundMagic = 12582912.0f;
-  const float n = (x * kLog2e + kRoundMagic) - kRoundMagic;
-  const float r = (x - n * kLn2Hi) - n * kLn2Lo;
+  // Every product–sum is spelled as madd (stage_math.hpp): the forward and the backward
+  // pass must get the same bits.
+  const float n = madd(x, kLog2e, kRoundMagic) - kRoundMagic;
+  const float r = madd(-n, kLn2Lo, madd(-n, kLn2Hi, x));
   float p = 1.0f / 5040.0f;
-  p = p * r + 1.0f / 720.0f;
-  p = p * r + 1.0f / 120.0f;
-  p = p * r + 1.0f / 24.0f;
-  p = p * r + 1.0f / 6.0f;
-  p = p * r + 0.5f;
-  p = p * r + 1.0f;
-  p = p * r + 1.0f;
+  p = madd(p, r, 1.0f / 720.0f);
+  p = madd(p, r, 1.0f / 120.0f);
+  p = madd(p, r, 1.0f / 24.0f);
+  p = madd(p, r, 1.0f / 6.0f);
+  p = madd(p, r, 0.5f);
+  p = madd(p, r, 1.0f);
+  p = madd(p, r, 1.0f);
   // Multiply by 2^n by building the float's exponent directly (n ≥ −126 here).
   const float two_n = std::bit_cast<float>(static_cast<int32_t>(n + 127.0f) << 23);
   return underflow ? 0.0f : p * two_n;

@@ -24,10 +24,11 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
-  // Per pixel: current transmittance (after the Gaussian being visited), the color and
-  // depth blended behind it, the incoming gradients, and the last blended index.
-  alignas(64) float T[S * S], T_final[S * S], Br[S * S], Bg[S * S], Bb[S * S], Bd[S * S];
-  alignas(64) float gr[S * S], gg[S * S], gb[S * S], ga[S * S], gd[S * S];
+  // Per pixel: current transmittance (after the Gaussian being visited), the incoming
+  // gradients, the last blended index, and Q = T_final·∂L/∂A − Σ_behind w·(c·∂L/∂C + z·∂L/∂D),
+  // the part of ∂L/∂α that the Gaussians behind contribute (times 1/(1 − α), see below).
+  alignas(64) float T[S * S], Q[S * S];
+  alignas(64) float gr[S * S], gg[S * S], gb[S * S], gd[S * S];
   alignas(64) int32_t last[S * S];
   alignas(64) float px_center[S];
   for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
@@ -35,19 +36,18 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
   for (int r = 0; r < S; ++r)
     for (int col = 0; col < S; ++col) {
       const int j = r * S + col;
-      Br[j] = Bg[j] = Bb[j] = Bd[j] = 0;
       if (r < rows && col < cols) {
         const int64_t p = int64_t(y0 + r) * fw.width + (x0 + col);
-        T[j] = T_final[j] = fw.final_transmittance[p];
+        T[j] = fw.final_transmittance[p];
         last[j] = fw.last_contributor[p];
         gr[j] = dC ? dC[3 * p] : 0.0f;
         gg[j] = dC ? dC[3 * p + 1] : 0.0f;
         gb[j] = dC ? dC[3 * p + 2] : 0.0f;
-        ga[j] = dA ? dA[p] : 0.0f;
         gd[j] = dD ? dD[p] : 0.0f;
+        Q[j] = dA ? T[j] * dA[p] : 0.0f;
       } else {
-        T[j] = T_final[j] = 1, last[j] = -1;
-        gr[j] = gg[j] = gb[j] = ga[j] = gd[j] = 0;
+        T[j] = 1, last[j] = -1;
+        gr[j] = gg[j] = gb[j] = gd[j] = Q[j] = 0;
       }
       max_last = std::max(max_last, last[j]);
     }
@@ -65,7 +65,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     // and the lanes are summed in a fixed order afterwards (deterministic).
     alignas(64) float acc[kEntrySlots][S] = {};
     int r0, r1;
-    box_rows_in_tile(my, fw.radii[2 * g + 1], y0, rows, r0, r1);
+    box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
@@ -84,10 +84,10 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
         const float ra = 1.0f / (1.0f - alpha);
         const float t_before = T[j] * ra;  // transmittance in front of this Gaussian
         const float w = hit * alpha * t_before;
-        // ∂C/∂α = c·T − (blended behind)/(1 − α); ∂A/∂α = T_final/(1 − α).
-        const float d_alpha = (cr * t_before - Br[j] * ra) * gr[j] + (cg * t_before - Bg[j] * ra) * gg[j] +
-                              (cb * t_before - Bb[j] * ra) * gb[j] + (z * t_before - Bd[j] * ra) * gd[j] +
-                              T_final[j] * ra * ga[j];
+        // ∂C/∂α = c·T − (blended behind)/(1 − α) per channel, ∂A/∂α = T_final/(1 − α):
+        // ∂L/∂α = T·(c·∂L/∂C + z·∂L/∂D) + Q/(1 − α).
+        const float dot = cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j];
+        const float d_alpha = t_before * dot + ra * Q[j];
         const float unclamped = o * vis <= kAlphaMax ? hit : 0.0f;
         const float d_sigma = -unclamped * d_alpha * o * vis;
         const float gmx = d_sigma * (a * dx + b * dy);
@@ -104,10 +104,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
         acc[kMy][col] += gmy;
         acc[kAbsX][col] += std::abs(gmx);
         acc[kAbsY][col] += std::abs(gmy);
-        Br[j] += cr * w;
-        Bg[j] += cg * w;
-        Bb[j] += cb * w;
-        Bd[j] += z * w;
+        Q[j] -= w * dot;
         T[j] = hit > 0.0f ? t_before : T[j];
       }
     }

@@ -38,6 +38,7 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
 #pragma omp parallel for num_threads(thread_count(s)) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
     out.radii[2 * i] = out.radii[2 * i + 1] = 0;
+    out.blend_radii[2 * i] = out.blend_radii[2 * i + 1] = 0;
     out.visible[i] = 0;
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     const Vec3<float> p = W * mean + t;
@@ -65,6 +66,11 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = conic[k];
     out.radii[2 * i] = static_cast<int32_t>(rx);
     out.radii[2 * i + 1] = static_cast<int32_t>(ry);
+    // Tiles and rows are visited only where α can reach 1/255; the 3.33σ radii above still
+    // decide visibility and the screen size that density control reads.
+    const float k = opacity_extent_sigmas(opacity);
+    out.blend_radii[2 * i] = static_cast<int32_t>(std::min(rx, std::ceil(k * std::sqrt(proj.cov2d(0, 0)))));
+    out.blend_radii[2 * i + 1] = static_cast<int32_t>(std::min(ry, std::ceil(k * std::sqrt(proj.cov2d(1, 1)))));
     out.depths[i] = p[2];
     out.opacity[i] = opacity;
     for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
@@ -79,15 +85,20 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
 // tiles, so there are no races and the result does not depend on the thread count.
 void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(out.visible.size());
-  auto rect_of = [&](int64_t i) {
-    return tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i], out.radii[2 * i + 1]);
+  auto rect_of = [&](int64_t i) {  // the tiles a Gaussian is listed in; none when α < 1/255 everywhere
+    if (out.blend_radii[2 * i] == 0 || out.blend_radii[2 * i + 1] == 0) return TileRect{0, 0, 0, 0};
+    return tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.blend_radii[2 * i],
+                     out.blend_radii[2 * i + 1]);
   };
   out.gaussian_offsets.assign(n + 1, 0);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
-    const int area = out.visible[i] ? rect_of(i).area() : 0;
-    out.gaussian_offsets[i + 1] = area;
-    if (area == 0) out.visible[i] = 0;
+    // Visible: the 3.33σ box touches a tile (it may still be listed in none, when its
+    // opacity keeps α below 1/255 everywhere in the image).
+    if (out.visible[i] &&
+        tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i], out.radii[2 * i + 1]).area() == 0)
+      out.visible[i] = 0;
+    out.gaussian_offsets[i + 1] = out.visible[i] ? rect_of(i).area() : 0;
   }
   // Depth is > near > 0, so its float bits order like the value: (bits << 32 | id)
   // sorts by depth, then id, with plain integer compares.
@@ -170,7 +181,7 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     const float o = out.opacity[g], z = out.depths[g];
     const float cr = out.rgb[3 * g], cg = out.rgb[3 * g + 1], cb = out.rgb[3 * g + 2];
     int r0, r1;
-    box_rows_in_tile(my, out.radii[2 * g + 1], y0, rows, r0, r1);
+    box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
@@ -244,6 +255,7 @@ void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSet
   out.rgb.assign(3 * n, 0.0f);
   out.opacity.assign(n, 0.0f);
   out.color_clamped.assign(3 * n, 0);
+  out.blend_radii.assign(2 * n, 0);
 
   preprocess(g, cam, s, sh_degree, out);
   const TileGrid grid(cam.width, cam.height);

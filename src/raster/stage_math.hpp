@@ -12,6 +12,15 @@
 
 namespace desplat::raster {
 
+// a·b + c. For float on a CPU with FMA, one fused instruction (one rounding): the code is
+// built with contraction on, and the α of a Gaussian at a pixel must come out bit-identical
+// in the forward and the backward pass, so the α path spells its fusions out instead of
+// leaving them to the compiler (which fuses a product only where it has a single use).
+template <typename T> T madd(T a, T b, T c) { return a * b + c; }
+#ifdef __FMA__
+template <> inline float madd(float a, float b, float c) { return std::fma(a, b, c); }
+#endif
+
 template <typename T> using Vec2 = Eigen::Matrix<T, 2, 1>;
 template <typename T> using Vec3 = Eigen::Matrix<T, 3, 1>;
 template <typename T> using Vec4 = Eigen::Matrix<T, 4, 1>;
@@ -23,6 +32,17 @@ constexpr float kAlphaMax = 0.999f;
 constexpr float kAlphaMin = 1.0f / 255.0f;
 constexpr float kTransmittanceMin = 1e-4f;
 constexpr float kExtentSigmas = 3.33f;
+
+// Sigmas out to which a Gaussian of opacity o can still reach α ≥ 1/255: σ = ½dᵀΣ⁻¹d ≤
+// ln(255·o), i.e. √(2·ln(255·o)) standard deviations along each axis (gsplat does the same).
+// 0.01 is added to ln(255·o) as a margin for float rounding (α at the edge ≤ 0.99/255),
+// and the result never exceeds kExtentSigmas, the opacity-free box. 0 when o < 1/255:
+// such a Gaussian is never blended anywhere.
+inline float opacity_extent_sigmas(float opacity) {
+  const float s = std::log(255.0f * opacity) + 0.01f;
+  if (!(s > 0.0f)) return 0.0f;
+  return std::min(kExtentSigmas, std::sqrt(2.0f * s));
+}
 // Radii are clamped here before conversion to int; a Gaussian whose center lies
 // further than this outside the image is culled (its squared offsets would overflow).
 constexpr float kMaxRadius = 1 << 20;
@@ -133,7 +153,8 @@ Mat2<float> conic_vjp(const Vec3<float>& conic, const Vec3<float>& d_conic);
 // --- per-pixel falloff -----------------------------------------------------------
 // d = μ2d − pixel center.
 template <typename T> T gaussian_sigma(T a, T b, T c, T dx, T dy) {
-  return T(0.5) * (a * dx * dx + c * dy * dy) + b * dx * dy;
+  // ½a·dx² + ½c·dy² + b·dx·dy, every product fused into the next sum (madd).
+  return madd(T(0.5) * a * dx, dx, madd(T(0.5) * c * dy, dy, b * dx * dy));
 }
 
 // α = min(0.999, o·exp(−σ)) given o·exp(−σ); written as a value select (std::min

@@ -2,6 +2,7 @@
 #include "desplat/train/trainable.hpp"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -113,31 +114,91 @@ float TrainableGaussians::mean_gradient(size_t i, const StatisticsRules& rules, 
   return rules.normalize_each_step ? mean : mean * 0.5f * float(image_size);
 }
 
-void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a) {
+namespace {
+// PyTorch's Adam on n contiguous values with one step size (= rate / bias correction 1).
+// Returns whether any value, first or second moment ended non-finite. Elementwise and
+// branch-free, so it vectorizes; the arithmetic is the same expression for every value.
+bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float step_size, float sqrt_bc2,
+               const AdamSettings& a) {
+  int bad = 0;
+#pragma omp simd reduction(| : bad)
+  for (size_t i = 0; i < n; ++i) {
+    m[i] = a.beta1 * m[i] + (1 - a.beta1) * g[i];
+    v[i] = a.beta2 * v[i] + (1 - a.beta2) * g[i] * g[i];
+    p[i] -= step_size * m[i] / (std::sqrt(v[i]) / sqrt_bc2 + a.eps);
+    // |x| <= FLT_MAX is false for ±Inf and NaN.
+    bad |= int(!(std::abs(p[i]) <= FLT_MAX)) | int(!(std::abs(m[i]) <= FLT_MAX)) | int(!(std::abs(v[i]) <= FLT_MAX));
+  }
+  return bad != 0;
+}
+
+bool row_finite(const float* p, const float* m, const float* v, int width) {
+  for (int k = 0; k < width; ++k)
+    if (!(std::isfinite(p[k]) && std::isfinite(m[k]) && std::isfinite(v[k]))) return false;
+  return true;
+}
+}  // namespace
+
+void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a,
+                                     int trained_color_floats) {
   ++adam_step;
   const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
   const double bc2 = 1.0 - std::pow(double(a.beta2), double(adam_step));
   const float sqrt_bc2 = float(std::sqrt(bc2));
+  const int64_t n = static_cast<int64_t>(size());
+  nonfinite_groups.clear();
+  // Rows in blocks: each block's groups are updated by one thread (the result does not
+  // depend on the thread count: every value's update is independent of the others).
+  constexpr int64_t kBlock = 512;
+  const int64_t blocks = (n + kBlock - 1) / kBlock;
+  std::vector<uint8_t> block_bad(size_t(blocks), 0);
   for (int g = 0; g < kParamGroups; ++g) {
     const ParamGroupInfo& info = kParamGroupTable[g];
-    std::vector<float>& p = param(info.id);
-    const std::vector<float>& grad = grads.*info.grads;
-    if (grad.size() != p.size()) throw std::logic_error("adam_update: gradient size differs from parameters");
-    const int stride = floats_per_gaussian(info.id);
-    const float base_rate = lr.*info.rate;
-    const bool sh_rest = info.id == ParamGroup::Colors && params.color_mode == ColorMode::SphericalHarmonics;
-    float* m = adam_m[g].data();
-    float* v = adam_v[g].data();
-    const int64_t n = static_cast<int64_t>(p.size());
+    if ((grads.*info.grads).size() != param(info.id).size())
+      throw std::logic_error("adam_update: gradient size differs from parameters");
+  }
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-      // In SH colors, the first 3 floats of each row are the DC coefficient.
-      const float rate = sh_rest && (i % stride) >= 3 ? lr.colors_rest : base_rate;
-      const float step_size = float(rate / bc1);
-      m[i] = a.beta1 * m[i] + (1 - a.beta1) * grad[i];
-      v[i] = a.beta2 * v[i] + (1 - a.beta2) * grad[i] * grad[i];
-      p[i] -= step_size * m[i] / (std::sqrt(v[i]) / sqrt_bc2 + a.eps);
+  for (int64_t b = 0; b < blocks; ++b) {
+    const int64_t row0 = b * kBlock, rows = std::min(kBlock, n - row0);
+    bool bad = false;
+    for (int g = 0; g < kParamGroups; ++g) {
+      const ParamGroupInfo& info = kParamGroupTable[g];
+      const int stride = floats_per_gaussian(info.id);
+      const size_t first = size_t(row0) * stride;
+      float* p = param(info.id).data() + first;
+      float* m = adam_m[g].data() + first;
+      float* v = adam_v[g].data() + first;
+      const float* grad = (grads.*info.grads).data() + first;
+      const float step_size = float(lr.*info.rate / bc1);
+      const bool sh = info.id == ParamGroup::Colors && params.color_mode == ColorMode::SphericalHarmonics;
+      if (!sh) {
+        bad |= adam_span(p, m, v, grad, size_t(rows) * stride, step_size, sqrt_bc2, a);
+        continue;
+      }
+      // SH colours: the DC coefficient (3 floats) at its rate, the trained higher bands at
+      // theirs. Bands above the active degree have had zero gradient since the start of the
+      // run, so their moments are zero and Adam would leave them unchanged: they are skipped.
+      const int rest = std::clamp(trained_color_floats < 0 ? stride : trained_color_floats, 3, stride) - 3;
+      const float rest_step = float(lr.colors_rest / bc1);
+      for (int64_t r = 0; r < rows; ++r) {
+        const size_t o = size_t(r) * stride;
+        bad |= adam_span(p + o, m + o, v + o, grad + o, 3, step_size, sqrt_bc2, a);
+        if (rest > 0) bad |= adam_span(p + o + 3, m + o + 3, v + o + 3, grad + o + 3, rest, rest_step, sqrt_bc2, a);
+      }
     }
+    block_bad[b] = bad;
+  }
+  // Rare: name the rows and groups that went non-finite.
+  for (int64_t b = 0; b < blocks; ++b) {
+    if (!block_bad[b]) continue;
+    if (nonfinite_groups.empty()) nonfinite_groups.assign(size(), 0);
+    for (int64_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
+      for (int g = 0; g < kParamGroups; ++g) {
+        const int w = floats_per_gaussian(ParamGroup(g));
+        const size_t o = size_t(i) * w;
+        if (!row_finite(param(ParamGroup(g)).data() + o, adam_m[g].data() + o, adam_v[g].data() + o, w))
+          nonfinite_groups[i] |= uint8_t(1u << g);
+      }
   }
 }
 

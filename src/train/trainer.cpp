@@ -112,7 +112,7 @@ size_t Trainer::distractor_count() const {
 RasterSettings Trainer::raster_settings() const {
   RasterSettings rs;
   rs.num_threads = config_.threads;
-  rs.active_sh_degree = static_cast<int>(std::min<int64_t>(step_ / config_.sh_degree_interval, config_.sh_degree));
+  rs.active_sh_degree = config_.sh_degree_at(step_);
   return rs;
 }
 
@@ -158,6 +158,8 @@ StepStats Trainer::step() {
 
   // 1. Render each layer.
   profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs); });
+  stats.static_pairs = static_pass_.forward.evaluated_pairs;
+  stats.static_visible = size_t(std::count(static_pass_.forward.visible.begin(), static_pass_.forward.visible.end(), 1));
   if (distractors)
     profile.time(&StepTimings::distractor, [&] { distractor_pass_.render(*distractors, cam, rs); });
 
@@ -209,7 +211,8 @@ StepStats Trainer::step() {
   const double decay = double(lr.means) / double(config_.lr.means);
   profile.time(&StepTimings::optimizer, [&] {
     if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
-    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{});
+    const int sh_bands = rs.active_sh_degree + 1;
+    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands);
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                     static_cast<int>(data_.train.size()), rng_);
@@ -328,28 +331,23 @@ int64_t Trainer::seed_if_due(int view, const Camera& cam, const FloatImage& targ
 
 // A Gaussian whose parameter or Adam moment is not finite is removed before it can
 // spread NaN through the blending of its neighbours.
+// Adam's update found them (TrainableGaussians::nonfinite_groups): every value it changed
+// is checked there, in the same pass.
 int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std::string()>& what) {
-  const size_t n = gs.size();
-  std::vector<uint8_t> keep;  // allocated only when something is pruned (rare): this runs every step
+  if (gs.nonfinite_groups.empty()) return 0;
+  std::vector<uint8_t> keep(gs.size(), 1);
   int64_t bad = 0;
-  for (int g = 0; g < kParamGroups; ++g) {
-    const ParamGroup group = ParamGroup(g);
-    const int stride = gs.floats_per_gaussian(group);
-    const std::vector<float>& p = gs.param(group);
-    for (size_t i = 0; i < n; ++i)
-      for (int k = 0; k < stride; ++k) {
-        const size_t j = i * stride + k;
-        if (std::isfinite(p[j]) && std::isfinite(gs.adam_m[g][j]) && std::isfinite(gs.adam_v[g][j])) continue;
-        if (keep.empty()) keep.assign(n, 1);
-        if (keep[i]) {
-          ++bad;
-          warn("step " + std::to_string(step_) + ": " + what() + " " + std::to_string(i) +
-               " has a non-finite parameter or optimizer moment (" + kParamGroupTable[g].name + "); pruned");
-        }
-        keep[i] = 0;
-      }
+  for (size_t i = 0; i < gs.size(); ++i) {
+    if (!gs.nonfinite_groups[i]) continue;
+    keep[i] = 0, ++bad;
+    std::string groups;
+    for (int g = 0; g < kParamGroups; ++g)
+      if (gs.nonfinite_groups[i] >> g & 1) groups += std::string(groups.empty() ? "" : ", ") + kParamGroupTable[g].name;
+    warn("step " + std::to_string(step_) + ": " + what() + " " + std::to_string(i) +
+         " has a non-finite parameter or optimizer moment (" + groups + "); pruned");
   }
-  if (bad > 0) gs.keep(keep);
+  gs.nonfinite_groups.clear();
+  gs.keep(keep);
   return bad;
 }
 

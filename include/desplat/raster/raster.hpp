@@ -55,6 +55,7 @@ struct RasterOutput {
   std::vector<float> means2d;    // [N, 2] projected center [px]
   std::vector<float> conics;     // [N, 3] (a, b, c) of the inverse 2D covariance
   std::vector<int32_t> radii;    // [N, 2] 3.33σ extent in x and y [px]; 0 if culled
+                                 // (the screen size density control reads)
   std::vector<float> depths;     // [N]    camera-space z
   std::vector<uint8_t> visible;  // [N]    1 if the Gaussian touches at least one tile
   // Work done, for benchmarks: Gaussian–pixel pairs whose α was evaluated.
@@ -64,6 +65,8 @@ struct RasterOutput {
   std::vector<float> rgb;                 // [N, 3] color after SH / clamp
   std::vector<float> opacity;             // [N]    sigmoid(logit)
   std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
+  std::vector<int32_t> blend_radii;       // [N, 2] the extent [px] in which α can reach 1/255
+                                          // (≤ radii; opacity-dependent): tiles and rows visited
   std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
   std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
   std::vector<int32_t> gaussian_offsets;  // [N + 1] CSR offsets into entry_of_gaussian

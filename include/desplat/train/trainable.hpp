@@ -67,8 +67,16 @@ struct TrainableGaussians {
   // rules normalize at the refinement). 0 when it was never counted.
   float mean_gradient(size_t i, const StatisticsRules& rules, int image_size) const;
 
-  // One Adam step (PyTorch's formulation) over every group with the given rates.
-  void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {});
+  // One Adam step (PyTorch's formulation) over every group with the given rates. In SH
+  // colour mode only the first `trained_color_floats` floats of each colour row are updated
+  // (3·(d+1)² for active degree d; −1: all): the bands above the active degree have zero
+  // gradient and zero moments, so Adam would leave them unchanged anyway. Afterwards
+  // `nonfinite_groups` names the rows that went non-finite (see below).
+  void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {},
+                   int trained_color_floats = -1);
+  // After adam_update: empty when every updated value and moment is finite; otherwise [N],
+  // bit g set when row i of group g holds a non-finite value or moment.
+  std::vector<uint8_t> nonfinite_groups;
   // Throws std::logic_error if any array's length disagrees with size().
   void check_consistent() const;
 };

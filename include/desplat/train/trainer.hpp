@@ -73,6 +73,11 @@ struct TrainConfig {
     return 1 << std::max<int64_t>(num_downscales - step / resolution_schedule, 0);
   }
   int64_t full_resolution_from() const { return int64_t(num_downscales) * resolution_schedule; }
+  // The SH degree step `step` renders and trains with (one band more every
+  // sh_degree_interval steps); a finished model renders with the degree it ended at.
+  int sh_degree_at(int64_t step) const {
+    return static_cast<int>(std::min<int64_t>(step / sh_degree_interval, sh_degree));
+  }
 };
 
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
@@ -130,6 +135,10 @@ struct StepStats {
   int64_t reseeded = 0;             // distractors seeded in this step's view (starved or uncovered)
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
+  // Work of the static layer's render: Gaussian–pixel pairs whose α was evaluated, and
+  // Gaussians visible in the view (the optimizer updates all `gaussians`).
+  int64_t static_pairs = 0;
+  size_t static_visible = 0;
 };
 
 struct ViewMetrics {
