@@ -25,37 +25,60 @@ struct Window {
 };
 const Window kGauss;
 
-// Valid separable filtering of a planar image [h, w] → [h − 10, w − 10].
-void filter_valid(const std::vector<float>& in, int w, int h, std::vector<float>& tmp, std::vector<float>& out) {
+// Valid separable filtering of a planar image [h, w] → [h − 10, w − 10]. Every output
+// is Σ_k w[k]·in[…+k] summed in order k = 0…10; the loops run k outside and x inside so
+// they vectorize over x without changing that order. Rows are split over the threads.
+void filter_valid(const float* in, int w, int h, float* tmp, float* out) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
-  tmp.resize(size_t(h) * ow);
-  out.resize(size_t(oh) * ow);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < ow; ++x) {
-      float s = 0;
-      for (int k = 0; k < kWindow; ++k) s += kGauss.w[k] * in[size_t(y) * w + x + k];
-      tmp[size_t(y) * ow + x] = s;
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < h; ++y) {
+    float* t = tmp + size_t(y) * ow;
+    const float* row = in + size_t(y) * w;
+    for (int x = 0; x < ow; ++x) t[x] = 0.0f;
+    for (int k = 0; k < kWindow; ++k)
+#pragma omp simd
+      for (int x = 0; x < ow; ++x) t[x] += kGauss.w[k] * row[x + k];
+  }
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < oh; ++y) {
+    float* o = out + size_t(y) * ow;
+    for (int x = 0; x < ow; ++x) o[x] = 0.0f;
+    for (int k = 0; k < kWindow; ++k) {
+      const float* t = tmp + size_t(y + k) * ow;
+#pragma omp simd
+      for (int x = 0; x < ow; ++x) o[x] += kGauss.w[k] * t[x];
     }
-  for (int y = 0; y < oh; ++y)
-    for (int x = 0; x < ow; ++x) {
-      float s = 0;
-      for (int k = 0; k < kWindow; ++k) s += kGauss.w[k] * tmp[size_t(y + k) * ow + x];
-      out[size_t(y) * ow + x] = s;
-    }
+  }
 }
 
-// Transpose of filter_valid: scatters [h − 10, w − 10] back to [h, w].
-void filter_valid_transposed(const std::vector<float>& in, int w, int h, std::vector<float>& tmp,
-                             std::vector<float>& out) {
+// Transpose of filter_valid: scatters [h − 10, w − 10] back to [h, w], written as the
+// equivalent gather. Each output sums its terms in the order of their source position
+// (row-major), as the scatter would.
+void filter_valid_transposed(const float* in, int w, int h, float* tmp, float* out) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
-  tmp.assign(size_t(h) * ow, 0.0f);
-  out.assign(size_t(h) * w, 0.0f);
-  for (int y = 0; y < oh; ++y)
-    for (int x = 0; x < ow; ++x)
-      for (int k = 0; k < kWindow; ++k) tmp[size_t(y + k) * ow + x] += kGauss.w[k] * in[size_t(y) * ow + x];
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < ow; ++x)
-      for (int k = 0; k < kWindow; ++k) out[size_t(y) * w + x + k] += kGauss.w[k] * tmp[size_t(y) * ow + x];
+  // Vertical: tmp[Y] = Σ_{y = Y−k valid} w[k]·in[y], sources y ascending (k descending).
+#pragma omp parallel for schedule(static)
+  for (int Y = 0; Y < h; ++Y) {
+    float* t = tmp + size_t(Y) * ow;
+    for (int x = 0; x < ow; ++x) t[x] = 0.0f;
+    for (int k = kWindow - 1; k >= 0; --k) {
+      const int y = Y - k;
+      if (y < 0 || y >= oh) continue;
+      const float* src = in + size_t(y) * ow;
+#pragma omp simd
+      for (int x = 0; x < ow; ++x) t[x] += kGauss.w[k] * src[x];
+    }
+  }
+  // Horizontal: out[X] = Σ_{x = X−k valid} w[k]·tmp[x], sources x ascending (k descending).
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < h; ++y) {
+    float* o = out + size_t(y) * w;
+    const float* t = tmp + size_t(y) * ow;
+    for (int X = 0; X < w; ++X) o[X] = 0.0f;
+    for (int k = kWindow - 1; k >= 0; --k)
+#pragma omp simd
+      for (int x = 0; x < ow; ++x) o[x + k] += kGauss.w[k] * t[x];
+  }
 }
 
 void check_sizes(size_t a, size_t b, int width, int height) {
@@ -67,32 +90,45 @@ void check_sizes(size_t a, size_t b, int width, int height) {
                                 std::to_string(height) + "x3");
 }
 
+// Scratch for one SSIM evaluation, kept between calls (one per thread that calls the loss)
+// so a training step allocates nothing.
+struct SsimScratch {
+  std::vector<float> px, py, pxx, pyy, pxy, tmp, mx, my, exx, eyy, exy, dmx, dexx, dexy, gmx, gxx, gxy;
+};
+
 // Mean SSIM over valid positions and channels; when d_x is given, adds
-// scale·∂SSIM/∂x to it ([H, W, 3]).
+// scale·∂SSIM/∂x to it ([H, W, 3]). The channels run one after another, each filter
+// split over the threads by rows.
 double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int w, int h, float scale,
                          float* d_x) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
-  const size_t n_out = size_t(ow) * oh;
+  const size_t n_out = size_t(ow) * oh, n_in = size_t(w) * h;
   const double count = double(n_out) * 3;
+  thread_local SsimScratch scratch;
+  SsimScratch& b = scratch;  // the calling thread's; the parallel loops below share it
+  for (auto* v : {&b.px, &b.py, &b.pxx, &b.pyy, &b.pxy, &b.gmx, &b.gxx, &b.gxy}) v->resize(n_in);
+  for (auto* v : {&b.mx, &b.my, &b.exx, &b.eyy, &b.exy, &b.dmx, &b.dexx, &b.dexy}) v->resize(n_out);
+  b.tmp.resize(size_t(h) * ow);
   double total = 0;
-#pragma omp parallel for schedule(static, 1) reduction(+ : total)
   for (int ch = 0; ch < 3; ++ch) {
-    std::vector<float> px(size_t(w) * h), py(px.size()), pxx(px.size()), pyy(px.size()), pxy(px.size());
-    for (size_t p = 0; p < px.size(); ++p) {
-      px[p] = x[3 * p + ch], py[p] = y[3 * p + ch];
-      pxx[p] = px[p] * px[p], pyy[p] = py[p] * py[p], pxy[p] = px[p] * py[p];
+#pragma omp parallel for schedule(static)
+    for (size_t p = 0; p < n_in; ++p) {
+      const float xv = x[3 * p + ch], yv = y[3 * p + ch];
+      b.px[p] = xv, b.py[p] = yv;
+      b.pxx[p] = xv * xv, b.pyy[p] = yv * yv, b.pxy[p] = xv * yv;
     }
-    std::vector<float> tmp, mx, my, exx, eyy, exy;
-    filter_valid(px, w, h, tmp, mx);
-    filter_valid(py, w, h, tmp, my);
-    filter_valid(pxx, w, h, tmp, exx);
-    filter_valid(pyy, w, h, tmp, eyy);
-    filter_valid(pxy, w, h, tmp, exy);
-    std::vector<float> dmx(d_x ? n_out : 0), dexx(dmx.size()), dexy(dmx.size());
+    filter_valid(b.px.data(), w, h, b.tmp.data(), b.mx.data());
+    filter_valid(b.py.data(), w, h, b.tmp.data(), b.my.data());
+    filter_valid(b.pxx.data(), w, h, b.tmp.data(), b.exx.data());
+    filter_valid(b.pyy.data(), w, h, b.tmp.data(), b.eyy.data());
+    filter_valid(b.pxy.data(), w, h, b.tmp.data(), b.exy.data());
+    // The per-position SSIM, summed in position order (one thread: the sum is the same
+    // whatever the thread count).
     double channel_sum = 0;
+    const float g = float(scale / count);
     for (size_t q = 0; q < n_out; ++q) {
-      const float mux = mx[q], muy = my[q];
-      const float sxx = exx[q] - mux * mux, syy = eyy[q] - muy * muy, sxy = exy[q] - mux * muy;
+      const float mux = b.mx[q], muy = b.my[q];
+      const float sxx = b.exx[q] - mux * mux, syy = b.eyy[q] - muy * muy, sxy = b.exy[q] - mux * muy;
       const float n1 = 2 * mux * muy + kC1, n2 = 2 * sxy + kC2;
       const float d1 = mux * mux + muy * muy + kC1, d2 = sxx + syy + kC2;
       const float s = (n1 * n2) / (d1 * d2);
@@ -102,18 +138,17 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
       const float ds_dmux = 2 * muy * n2 / (d1 * d2) - s * 2 * mux / d1;
       const float ds_dsxx = -s / d2;
       const float ds_dsxy = 2 * n1 / (d1 * d2);
-      const float g = float(scale / count);
-      dmx[q] = g * (ds_dmux - 2 * mux * ds_dsxx - muy * ds_dsxy);
-      dexx[q] = g * ds_dsxx;
-      dexy[q] = g * ds_dsxy;
+      b.dmx[q] = g * (ds_dmux - 2 * mux * ds_dsxx - muy * ds_dsxy);
+      b.dexx[q] = g * ds_dsxx;
+      b.dexy[q] = g * ds_dsxy;
     }
     total += channel_sum;
     if (!d_x) continue;
-    std::vector<float> gmx, gxx, gxy;
-    filter_valid_transposed(dmx, w, h, tmp, gmx);
-    filter_valid_transposed(dexx, w, h, tmp, gxx);
-    filter_valid_transposed(dexy, w, h, tmp, gxy);
-    for (size_t p = 0; p < px.size(); ++p) d_x[3 * p + ch] += gmx[p] + 2 * px[p] * gxx[p] + py[p] * gxy[p];
+    filter_valid_transposed(b.dmx.data(), w, h, b.tmp.data(), b.gmx.data());
+    filter_valid_transposed(b.dexx.data(), w, h, b.tmp.data(), b.gxx.data());
+    filter_valid_transposed(b.dexy.data(), w, h, b.tmp.data(), b.gxy.data());
+#pragma omp parallel for schedule(static)
+    for (size_t p = 0; p < n_in; ++p) d_x[3 * p + ch] += b.gmx[p] + 2 * b.px[p] * b.gxx[p] + b.py[p] * b.gxy[p];
   }
   return total / count;
 }
