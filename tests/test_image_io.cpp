@@ -3,11 +3,14 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 
 #include "desplat/io/image_io.hpp"
+#include "support/expect.hpp"
+#include "support/fox_scene.hpp"
 
 namespace desplat {
 namespace {
@@ -77,6 +80,41 @@ TEST(ImageIo, UnreadableFilesNameTheFile) {
   }
   fs::remove(bad);
   EXPECT_THROW(read_image_rgb(temp("missing.png")), ImageError);
+}
+
+// A JPEG cut short decodes without an error in libjpeg (the missing rows come out grey), so
+// read_image_rgb checks that the data reaches the end-of-image marker. The fox's camera
+// JPEGs (EXIF thumbnails inside) must pass; each of them truncated must fail with the file
+// named; data appended after the end marker (motion photos, vendor trailers) is allowed.
+TEST(ImageIo, TruncatedJpegIsAnErrorThatNamesTheFile) {
+  if (!testing::fox_available()) GTEST_SKIP() << "fox capture not found";
+  std::vector<fs::path> photos;
+  for (const auto& e : fs::directory_iterator(testing::fox_dir() / "images")) photos.push_back(e.path());
+  ASSERT_GE(photos.size(), 10u);
+  std::sort(photos.begin(), photos.end());
+  photos.resize(10);
+  for (const fs::path& photo : photos) {
+    const FloatImage whole = read_image_rgb(photo);  // intact files read as before
+    std::ifstream in(photo, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (const size_t keep : {size_t(5000), bytes.size() / 2, bytes.size() - 2}) {
+      const fs::path cut = temp("cut.jpg");
+      std::ofstream(cut, std::ios::binary) << bytes.substr(0, keep);
+      const std::string error = testing::error_of<ImageError>([&] { read_image_rgb(cut); });
+      EXPECT_CONTAINS(error, cut.string());
+      EXPECT_CONTAINS(error, "truncated");
+      fs::remove(cut);
+    }
+    const fs::path trailer = temp("trailer.jpg");
+    std::ofstream(trailer, std::ios::binary) << bytes << std::string(700, '\0') << "vendor data \xff\xd8";
+    EXPECT_EQ(read_image_rgb(trailer).pixels, whole.pixels) << photo;
+    fs::remove(trailer);
+  }
+  // A JPEG written by OpenImageIO itself reads back.
+  const fs::path own = temp("own.jpg");
+  write_raw<uint8_t>(own, 16, 8, 3, OIIO::TypeDesc::UINT8, std::vector<uint8_t>(16 * 8 * 3, 77));
+  EXPECT_NO_THROW(read_image_rgb(own));
+  fs::remove(own);
 }
 
 }  // namespace

@@ -7,6 +7,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
+
+#include "jpeg_end.hpp"
 
 namespace desplat {
 
@@ -22,6 +25,10 @@ FloatImage read_image_rgb(const std::filesystem::path& path) {
   std::vector<float> raw(size_t(spec.width) * spec.height * spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, raw.data()))
     throw ImageError("cannot decode image " + path.string() + ": " + in->geterror());
+  if (std::string(in->format_name()) == "jpeg" && !jpeg_reaches_end_marker(path))
+    throw ImageError("image " + path.string() +
+                     " is truncated or damaged: its JPEG data ends before the end-of-image marker "
+                     "(a decoder would fill the missing part with grey)");
   FloatImage img{spec.width, spec.height, 3, std::vector<float>(size_t(spec.width) * spec.height * 3)};
   const size_t pixels = size_t(spec.width) * spec.height;
   for (size_t p = 0; p < pixels; ++p)
