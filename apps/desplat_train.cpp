@@ -43,6 +43,9 @@ int main(int argc, char** argv) {
                "ablation: never split/duplicate/cull distractors");
   app.add_flag("--no-regularization", o.no_regularization, "ablation: drop the two opacity regularizers");
   app.add_flag("--resume", o.resume, "continue from --out/checkpoint.ckpt");
+  app.add_flag("--overwrite", o.overwrite,
+               "replace an earlier run's outputs in --out (config.json, checkpoint.ckpt, metrics.json, "
+               "point_cloud.ply, renders/); without it such a folder is refused");
   app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
       ->check(desplat::apps::integer_in(1, 64))->capture_default_str();
   std::string split_rule = "every-nth";

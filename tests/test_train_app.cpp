@@ -8,6 +8,7 @@
 
 #include "desplat/io/ply.hpp"
 #include "desplat/synth/synth.hpp"
+#include "support/expect.hpp"
 #include "support/scene_on_disk.hpp"
 #include "support/synthetic_views.hpp"
 
@@ -125,6 +126,37 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
                                 renders.string() + " --layer distractor");
   EXPECT_EQ(bad_layer.exit_code, 1);
   EXPECT_NE(bad_layer.output.find("view 'view_0.png' is not a training view"), std::string::npos) << bad_layer.output;
+}
+
+// A fresh run into a folder that holds an earlier run is refused (it would overwrite that
+// model's checkpoint and leave its renders next to the new ones); --overwrite replaces
+// exactly the run's outputs and leaves other files alone.
+TEST_F(TrainApp, ReusedOutputFolderIsRefusedUnlessOverwritten) {
+  const fs::path out = root_ / "reused";
+  ASSERT_EQ(run(train() + " --out " + out.string() + " --iterations 5 --threads 2 --static-only").exit_code, 0);
+  const std::string checkpoint = testing::slurp(out / "checkpoint.ckpt");
+  ASSERT_FALSE(checkpoint.empty());
+  std::ofstream(out / "renders" / "test" / "from_another_scene.png") << "stale";
+  std::ofstream(out / "notes.txt") << "the user's";
+
+  Outcome r = run(train() + " --out " + out.string() + " --iterations 5 --threads 2 --static-only");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_CONTAINS(r.output, out.string() + " already holds a training run's outputs");
+  EXPECT_CONTAINS(r.output, "checkpoint.ckpt");
+  EXPECT_CONTAINS(r.output, "--resume");
+  EXPECT_CONTAINS(r.output, "--overwrite");
+  EXPECT_EQ(testing::slurp(out / "checkpoint.ckpt"), checkpoint) << "the earlier model must be untouched";
+
+  r = run(train() + " --out " + out.string() + " --iterations 5 --threads 2 --resume --overwrite");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_CONTAINS(r.output, "--resume and --overwrite contradict each other");
+
+  r = run(train() + " --out " + out.string() + " --iterations 5 --threads 2 --static-only --overwrite --seed 9");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(out / "renders" / "test" / "from_another_scene.png"));
+  EXPECT_TRUE(fs::exists(out / "notes.txt"));
+  EXPECT_TRUE(fs::exists(out / "metrics.json"));
+  EXPECT_NE(testing::slurp(out / "checkpoint.ckpt"), checkpoint);
 }
 
 TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {

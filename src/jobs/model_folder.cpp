@@ -171,4 +171,19 @@ void ModelFolder::write_metrics(const json& metrics) const { write_file_atomical
 
 json ModelFolder::read_metrics() const { return read_json_file(metrics_path(), "no metrics"); }
 
+std::vector<std::filesystem::path> ModelFolder::existing_training_outputs() const {
+  std::vector<std::filesystem::path> found;
+  for (const char* name : {"config.json", "checkpoint.ckpt", "metrics.json", "point_cloud.ply", "renders"})
+    if (std::filesystem::exists(dir_ / name)) found.push_back(dir_ / name);
+  return found;
+}
+
+void ModelFolder::remove_training_outputs() const {
+  for (const std::filesystem::path& p : existing_training_outputs()) {
+    std::error_code ec;
+    std::filesystem::remove_all(p, ec);
+    if (ec) throw std::invalid_argument("--overwrite: cannot remove " + p.string() + ": " + ec.message());
+  }
+}
+
 }  // namespace desplat

@@ -205,6 +205,19 @@ json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
 }
 
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
+  if (opt.resume && opt.overwrite) throw std::invalid_argument("--resume and --overwrite contradict each other");
+  if (!opt.resume) {
+    const ModelFolder earlier(opt.out_dir);
+    const std::vector<fs::path> outputs = earlier.existing_training_outputs();
+    if (!outputs.empty() && !opt.overwrite) {
+      std::string names;
+      for (const fs::path& p : outputs) names += (names.empty() ? "" : ", ") + p.filename().string();
+      throw std::invalid_argument(opt.out_dir.string() + " already holds a training run's outputs (" + names +
+                                  "): continue it with --resume, replace them with --overwrite, or choose "
+                                  "another --out");
+    }
+    if (opt.overwrite) earlier.remove_training_outputs();
+  }
   fs::create_directories(opt.out_dir);
   fs::path data_dir = opt.data_dir;
   if (!opt.images_dir.empty()) {

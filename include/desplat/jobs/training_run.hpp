@@ -42,6 +42,10 @@ struct TrainingRunOptions {
   bool no_distractor_density = false;
   bool no_regularization = false;
   bool resume = false;
+  // A fresh run into a folder that holds an earlier run's outputs is refused (it would
+  // overwrite that model's checkpoint and leave its renders mixed with the new ones) unless
+  // `overwrite`, which removes those outputs first.
+  bool overwrite = false;
   int downscale = 1;
   SplitOptions split;
   int eval_every = 0;        // 0: only at the end
