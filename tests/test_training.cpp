@@ -7,6 +7,7 @@
 #include <set>
 
 #include "desplat/train/training_checkpoint.hpp"
+#include "support/expect.hpp"
 #include "support/synthetic_views.hpp"
 
 namespace desplat::test {
@@ -96,6 +97,28 @@ TEST(Training, LossFallsAndHeldOutPsnrClearsFloor) {
   EXPECT_GT(psnr_after, 23.0) << "before " << psnr_before;
   EXPECT_GT(psnr_after, psnr_before + 2.0);
   EXPECT_GT(splits + dups, 0);  // density control ran
+}
+
+// Images too small for SSIM's 11×11 window, at the coarsest level of the resolution
+// schedule, are refused when the trainer is built, naming the view and both sizes.
+TEST(Training, ImagesTooSmallForSsimAreRefusedUpFront) {
+  const TrainingData data = synthetic_training_data(8, 64, 48, 5);
+  TrainConfig config = short_config(10);
+  config.num_downscales = 2;  // 16×12 at the start: enough
+  EXPECT_NO_THROW(Trainer(data, config));
+  config.num_downscales = 3;  // 8×6 at the start
+  const std::string error = testing::error_of<std::invalid_argument>([&] { Trainer t(data, config); });
+  EXPECT_CONTAINS(error, "training view " + data.train[0].name + " is 64x48 px, and 8x6 px in the first steps");
+  EXPECT_CONTAINS(error, "num_downscales 3");
+  EXPECT_CONTAINS(error, "at least 11x11");
+  // A test view is scored at full size only.
+  TrainingData small_test = data;
+  small_test.test.push_back(small_test.train.back());
+  small_test.test.back().camera = downscale_camera(small_test.test.back().camera, 5);  // 12×9
+  small_test.test.back().image = downscale_image(small_test.test.back().image, 5);
+  config.num_downscales = 0;
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(small_test, config); }),
+                  "test view " + small_test.test.back().name + " is 12x9 px");
 }
 
 TEST(Training, NonFiniteGaussianIsPrunedAndTrainingContinues) {

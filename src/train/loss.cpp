@@ -11,7 +11,7 @@
 namespace desplat {
 namespace {
 
-constexpr int kWindow = 11;
+constexpr int kWindow = kSsimWindow;
 constexpr double kSigma = 1.5;
 constexpr float kC1 = 0.01f * 0.01f, kC2 = 0.03f * 0.03f;
 

@@ -81,6 +81,23 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
+  // SSIM (the loss, the evaluation) needs 11×11 pixels, at the coarsest level of the
+  // resolution schedule too: say so before training rather than fail at its first step.
+  const int coarsest = config_.downscale_at(0);
+  auto check_size = [&](const TrainView& v, int factor, const char* kind) {
+    const int w = std::max(1, v.camera.width / factor), h = std::max(1, v.camera.height / factor);
+    if (w >= kSsimWindow && h >= kSsimWindow) return;
+    std::string where = std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height) + " px";
+    if (factor > 1)
+      where += ", and " + std::to_string(w) + "x" + std::to_string(h) + " px in the first steps (the resolution " +
+               "schedule starts at 1/" + std::to_string(factor) + ", num_downscales " +
+               std::to_string(config_.num_downscales) + ")";
+    throw std::invalid_argument(std::string(kind) + " view " + v.name + " is " + where + ": the SSIM loss needs at least " +
+                                std::to_string(kSsimWindow) + "x" + std::to_string(kSsimWindow) +
+                                " px; use a smaller --downscale" + (factor > 1 ? " or a lower num_downscales" : ""));
+  };
+  for (const TrainView& v : data_.train) check_size(v, coarsest, "training");
+  for (const TrainView& v : data_.test) check_size(v, 1, "test");
   // Transient points are DeSplat's: without distractors the model is the Splatfacto
   // baseline (--static-only, the bench's static-only runs) and starts from every point.
   if (!config_.distractors.enabled) config_.transient_points.action = TransientPointAction::keep;

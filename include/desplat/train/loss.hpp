@@ -10,6 +10,9 @@
 
 namespace desplat {
 
+// The SSIM window's side [px]: the smallest image the loss and ssim() accept.
+inline constexpr int kSsimWindow = 11;
+
 struct PhotometricLoss {
   double loss = 0;  // (1 − λ)·L1 + λ·(1 − SSIM)
   double l1 = 0;    // mean |render − target|
