@@ -151,13 +151,13 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
   // depend on the thread count: every value's update is independent of the others).
   constexpr int64_t kBlock = 512;
   const int64_t blocks = (n + kBlock - 1) / kBlock;
-  std::vector<uint8_t> block_bad(size_t(blocks), 0);
+  int any_bad = 0;
   for (int g = 0; g < kParamGroups; ++g) {
     const ParamGroupInfo& info = kParamGroupTable[g];
     if ((grads.*info.grads).size() != param(info.id).size())
       throw std::logic_error("adam_update: gradient size differs from parameters");
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) reduction(| : any_bad)
   for (int64_t b = 0; b < blocks; ++b) {
     const int64_t row0 = b * kBlock, rows = std::min(kBlock, n - row0);
     bool bad = false;
@@ -186,20 +186,18 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
         if (rest > 0) bad |= adam_span(p + o + 3, m + o + 3, v + o + 3, grad + o + 3, rest, rest_step, sqrt_bc2, a);
       }
     }
-    block_bad[b] = bad;
+    any_bad |= int(bad);
   }
+  if (!any_bad) return;
   // Rare: name the rows and groups that went non-finite.
-  for (int64_t b = 0; b < blocks; ++b) {
-    if (!block_bad[b]) continue;
-    if (nonfinite_groups.empty()) nonfinite_groups.assign(size(), 0);
-    for (int64_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
-      for (int g = 0; g < kParamGroups; ++g) {
-        const int w = floats_per_gaussian(ParamGroup(g));
-        const size_t o = size_t(i) * w;
-        if (!row_finite(param(ParamGroup(g)).data() + o, adam_m[g].data() + o, adam_v[g].data() + o, w))
-          nonfinite_groups[i] |= uint8_t(1u << g);
-      }
-  }
+  nonfinite_groups.assign(size(), 0);
+  for (int64_t i = 0; i < n; ++i)
+    for (int g = 0; g < kParamGroups; ++g) {
+      const int w = floats_per_gaussian(ParamGroup(g));
+      const size_t o = size_t(i) * w;
+      if (!row_finite(param(ParamGroup(g)).data() + o, adam_m[g].data() + o, adam_v[g].data() + o, w))
+        nonfinite_groups[i] |= uint8_t(1u << g);
+    }
 }
 
 void TrainableGaussians::check_consistent() const {
