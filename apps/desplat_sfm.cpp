@@ -64,6 +64,8 @@ void print_summary(const sfm::SfmResult& r) {
   std::printf("model:  %s\n", r.sparse_dir.c_str());
   std::printf("images: %s\n", r.images_dir.c_str());
   std::printf("log:    %s\n", r.log.c_str());
+  const std::string lost = sfm::describe_lost_photos(r);
+  if (!lost.empty()) std::printf("%s", lost.c_str());
   if (r.num_models > 1)
     std::printf("note: colmap split the photos into %d models; the largest is sparse/0\n", r.num_models);
 }

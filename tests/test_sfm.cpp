@@ -410,6 +410,9 @@ TEST_F(FakeColmap, TooFewRegisteredKeepsThePartialModel) {
   const auto e = expect_error(options_, SfmErrorKind::TooFewRegistered);
   EXPECT_CONTAINS(e.what(), "only 2 of 6 photos could be placed (at least 3 needed); take more overlapping photos");
   EXPECT_CONTAINS(e.what(), "--min-registered 2");
+  // The model holds p0 and p1: the message names the four photos it lost.
+  EXPECT_CONTAINS(e.what(), "4 of 6 photos could not be placed by structure from motion (not in the model, so not "
+                            "trained on): p2.png, p3.png, p4.png, p5.png");
   EXPECT_EQ(colmap::read_model(options_.out / "sparse" / "0").images.size(), 2u);
 
   options_.overwrite = true;  // what the message suggests
@@ -458,13 +461,55 @@ TEST_F(FakeColmap, BadImageFolders) {
   EXPECT_FALSE(fs::exists(options_.out));
 }
 
-TEST_F(FakeColmap, FindsPhotosRecursivelyAndSkipsOtherFiles) {
+// A JPEG cut short halfway through its compressed data, as a failed copy leaves it.
+void write_truncated_jpeg(const fs::path& path) {
+  desplat::FloatImage img{64, 64, 3, std::vector<float>(64 * 64 * 3, 0.25f)};
+  for (size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = static_cast<float>((i * 37) % 101) / 100.0f;
+  desplat::write_image(path, img);
+  fs::resize_file(path, fs::file_size(path) * 3 / 4);
+}
+
+TEST_F(FakeColmap, FindsPhotosRecursivelyAndNamesEveryFileItSkips) {
   write_tiny_photos(photos_ / "day2", 1);
   spit(photos_ / "notes.txt", "x");
   spit(photos_ / "broken.png", "x");
-  const auto found = sfm::find_photos(photos_);
-  ASSERT_EQ(found.size(), 7u);
-  EXPECT_EQ(found[0], fs::path("day2/p0.png"));
+  spit(photos_ / "empty.jpg", "");
+  write_truncated_jpeg(photos_ / "cut.jpg");
+  const sfm::PhotoScan scan = sfm::scan_photos(photos_);
+  ASSERT_EQ(scan.photos.size(), 7u);
+  EXPECT_EQ(scan.photos[0], fs::path("day2/p0.png"));
+  ASSERT_EQ(scan.skipped.size(), 4u);  // sorted by name
+  EXPECT_EQ(scan.skipped[0].path, fs::path("broken.png"));
+  EXPECT_CONTAINS(scan.skipped[0].reason, "cannot be opened as an image");
+  EXPECT_EQ(scan.skipped[1].path, fs::path("cut.jpg"));
+  EXPECT_CONTAINS(scan.skipped[1].reason, "the JPEG is truncated");
+  EXPECT_EQ(scan.skipped[2].path, fs::path("empty.jpg"));
+  EXPECT_EQ(scan.skipped[2].reason, "empty file (0 bytes)");
+  EXPECT_EQ(scan.skipped[3].path, fs::path("notes.txt"));
+  EXPECT_CONTAINS(scan.skipped[3].reason, "not a photo");
+}
+
+TEST_F(FakeColmap, ResultNamesSkippedFilesAndUnplacedPhotos) {
+  give_models({5});  // p0..p4 of p0..p5
+  spit(photos_ / "empty.jpg", "");
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+  EXPECT_EQ(r.num_photos, 6);
+  ASSERT_EQ(r.unregistered.size(), 1u);
+  EXPECT_EQ(r.unregistered[0], fs::path("p5.png"));
+  ASSERT_EQ(r.skipped.size(), 1u);
+  EXPECT_EQ(slurp(options_.out / "image_list.txt").find("empty.jpg"), std::string::npos);
+  EXPECT_EQ(sfm::describe_lost_photos(r),
+            "1 file(s) in the images folder were not used:\n"
+            "  empty.jpg: empty file (0 bytes)\n"
+            "1 of 6 photos could not be placed by structure from motion (not in the model, so not trained on): "
+            "p5.png\n");
+
+  sfm::SfmResult many;  // long lists are cut
+  many.num_photos = 30;
+  for (int i = 0; i < 25; ++i) many.unregistered.push_back(photo_name(i));
+  EXPECT_CONTAINS(sfm::describe_lost_photos(many, 3), "25 of 30 photos could not be placed");
+  EXPECT_CONTAINS(sfm::describe_lost_photos(many, 3), ": p0.png, p1.png, p2.png ... and 22 more\n");
+  EXPECT_EQ(sfm::describe_lost_photos(sfm::SfmResult{}), "");
 }
 
 TEST_F(FakeColmap, EarlierResultsNeedOverwrite) {
@@ -485,7 +530,7 @@ TEST_F(FakeColmap, InputThatIsAlreadyOutImagesIsUsedInPlace) {
   options_.out = scene;
   sfm::run_sfm(options_);
   EXPECT_FALSE(fs::is_symlink(scene / "images"));
-  EXPECT_EQ(sfm::find_photos(scene / "images").size(), 6u);
+  EXPECT_EQ(sfm::scan_photos(scene / "images").photos.size(), 6u);
 }
 
 TEST_F(FakeColmap, CopyImagesCopiesThePhotos) {
@@ -493,7 +538,7 @@ TEST_F(FakeColmap, CopyImagesCopiesThePhotos) {
   options_.copy_images = true;
   sfm::run_sfm(options_);
   EXPECT_FALSE(fs::is_symlink(options_.out / "images"));
-  EXPECT_EQ(sfm::find_photos(options_.out / "images").size(), 6u);
+  EXPECT_EQ(sfm::scan_photos(options_.out / "images").photos.size(), 6u);
 }
 
 TEST_F(FakeColmap, OutInsideTheImagesFolderIsRefused) {

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <string>
 
-#include "jpeg_end.hpp"
+#include "desplat/io/jpeg_end.hpp"
 
 namespace desplat {
 

@@ -1,4 +1,4 @@
-#include "jpeg_end.hpp"
+#include "desplat/io/jpeg_end.hpp"
 
 #include <fstream>
 #include <iterator>

@@ -143,6 +143,16 @@ json model_cost(const Trainer& t) {
           {"distractors_per_view", per_view}};
 }
 
+// What SfM made of the user's photos, including every file and photo it left out.
+json sfm_json(const sfm::SfmResult& r) {
+  json skipped = json::array(), unregistered = json::array();
+  for (const sfm::SkippedFile& f : r.skipped) skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
+  for (const fs::path& p : r.unregistered) unregistered.push_back(p.generic_string());
+  return {{"photos", r.num_photos},     {"registered", r.num_registered}, {"points", r.num_points},
+          {"models", r.num_models},     {"seconds", r.seconds},           {"skipped_files", skipped},
+          {"unregistered_photos", unregistered}};
+}
+
 }  // namespace
 
 TrainingData load_training_data(const Scene& scene) {
@@ -220,6 +230,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
   fs::create_directories(opt.out_dir);
   fs::path data_dir = opt.data_dir;
+  json sfm_summary;  // null unless this run ran SfM
   if (!opt.images_dir.empty()) {
     sfm::SfmOptions sfm_options;
     sfm_options.images = opt.images_dir;
@@ -229,6 +240,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     const sfm::SfmResult r = sfm::run_sfm(sfm_options);
     std::printf("SfM: %d of %d photos registered, %d points (%.0f s)\n", r.num_registered, r.num_photos, r.num_points,
                 r.seconds);
+    std::printf("%s", sfm::describe_lost_photos(r).c_str());
+    sfm_summary = sfm_json(r);
     data_dir = sfm_options.out;
   }
 
@@ -385,6 +398,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                  {"seeded_distractors", trainer.transient_seeded}};
   const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
   metrics["distractor_masks"] = mask_json(masks);
+  if (!sfm_summary.is_null()) metrics["sfm"] = sfm_summary;
   metrics["history"] = history;
   metrics["wall_seconds_this_run"] = wall;
   metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;

@@ -17,11 +17,13 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <string_view>
 
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/io/colmap.hpp"
+#include "desplat/io/jpeg_end.hpp"
 #include "desplat/sfm/subprocess.hpp"
 #include "sfm/progress.hpp"
 
@@ -53,25 +55,35 @@ bool has_image_extension(const fs::path& p) {
   return std::any_of(std::begin(kExtensions), std::end(kExtensions), [&](const char* e) { return ext == e; });
 }
 
-// Opening the header catches truncated or mislabelled files before colmap skips them quietly.
-bool header_readable(const fs::path& p) {
+// Why a file colmap would be given is not a usable photo ("" when it is one). colmap's reader
+// skips such files quietly or, for a truncated JPEG, reads grey rows; either way the user must
+// hear which file was left out and why.
+std::string photo_problem(const fs::path& p, const fs::path& rel) {
+  if (!has_image_extension(p)) return "not a photo (extension is not .jpg, .jpeg, .png, .tif, .tiff, .bmp, .ppm or .pgm)";
+  if (rel.string().find_first_of("\r\n") != std::string::npos)
+    return "its name holds a line break, which colmap's list of images cannot hold; rename it";
+  std::error_code ec;
+  if (fs::file_size(p, ec) == 0 && !ec) return "empty file (0 bytes)";
   auto in = OIIO::ImageInput::open(p.string());
   if (!in) {
-    (void)OIIO::geterror();  // clear OIIO's pending error
-    return false;
+    std::string why = OIIO::geterror();  // also clears OIIO's pending error
+    if (why.empty()) why = "unknown format";
+    return "cannot be opened as an image: " + why;
   }
-  const bool ok = in->spec().width > 0 && in->spec().height > 0;
+  const bool has_pixels = in->spec().width > 0 && in->spec().height > 0;
+  const std::string format = in->format_name();
   in->close();
-  return ok;
+  if (!has_pixels) return "the image has no pixels";
+  try {
+    if (format == "jpeg" && !jpeg_reaches_end_marker(p))
+      return "the JPEG is truncated (its data stops before the end marker; a copy cut short?)";
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
 }
 
-struct PhotoScan {
-  std::vector<fs::path> photos;  // relative to the folder, sorted
-  int other_files = 0;           // regular files that are not readable photos
-  fs::path example_other;        // one of them, for the message
-};
-
-PhotoScan scan_photos(const fs::path& dir) {
+PhotoScan scan_photo_folder(const fs::path& dir) {
   std::error_code ec;
   if (!fs::exists(dir, ec))
     fail(SfmErrorKind::BadImages, "the images folder " + in_quotes(dir) +
@@ -92,26 +104,27 @@ PhotoScan scan_photos(const fs::path& dir) {
     }
     if (!it->is_regular_file(ec)) continue;
     const fs::path rel = p.lexically_relative(dir);
-    // colmap's image list is one name per line.
-    if (has_image_extension(p) && rel.string().find_first_of("\r\n") == std::string::npos && header_readable(p)) {
+    std::string problem = photo_problem(p, rel);
+    if (problem.empty())
       scan.photos.push_back(rel);
-    } else {
-      if (scan.other_files++ == 0) scan.example_other = rel;
-    }
+    else
+      scan.skipped.push_back({rel, std::move(problem)});
   }
   std::sort(scan.photos.begin(), scan.photos.end());
+  std::sort(scan.skipped.begin(), scan.skipped.end(),
+            [](const SkippedFile& a, const SkippedFile& b) { return a.path < b.path; });
   return scan;
 }
 
 void check_photos_found(const PhotoScan& scan, const fs::path& dir) {
   if (!scan.photos.empty()) return;
-  if (scan.other_files == 0)
+  if (scan.skipped.empty())
     fail(SfmErrorKind::BadImages,
          "the images folder " + in_quotes(dir) + " is empty; put your photos (JPEG, PNG or TIFF) in it");
-  fail(SfmErrorKind::BadImages, "no readable photos in " + in_quotes(dir) + ": its " +
-                                    std::to_string(scan.other_files) + " file(s) (e.g. " +
-                                    in_quotes(scan.example_other) +
-                                    ") are not JPEG/PNG/TIFF/BMP/PPM images that can be opened");
+  const SkippedFile& first = scan.skipped.front();
+  fail(SfmErrorKind::BadImages, "no readable photos in " + in_quotes(dir) + ": none of its " +
+                                    std::to_string(scan.skipped.size()) + " file(s) is a usable photo (e.g. " +
+                                    in_quotes(first.path) + ": " + first.reason + ")");
 }
 
 int resolve_min_registered(const SfmOptions& o, int num_photos) {
@@ -380,6 +393,7 @@ struct ModelInfo {
   fs::path dir;
   int registered = -1;  // -1: unreadable
   int points = 0;
+  std::set<std::string> image_names;  // as colmap wrote them: relative to images/, '/'-separated
   std::string error;  // why it is unreadable
 };
 
@@ -400,6 +414,7 @@ std::vector<ModelInfo> collect_models(const fs::path& sparse_root) {
       const colmap::Model m = colmap::read_model_binary(e.path());
       info.registered = static_cast<int>(m.images.size());
       info.points = static_cast<int>(m.points.size());
+      for (const auto& [id, image] : m.images) info.image_names.insert(image.name);
     } catch (const colmap::ColmapError& err) {
       info.error = err.what();  // ranked last; it keeps a numbered folder so nothing is lost
     }
@@ -459,14 +474,27 @@ bool said_no_model(const StageOutput& s) {
                                   "The full output is in " + in_quotes(c.layout.log));
 }
 
-void check_registered(const Context& c, Matcher m, const ModelInfo& best, int min_registered) {
+std::vector<fs::path> photos_not_in(const ModelInfo& model, const std::vector<fs::path>& photos) {
+  std::vector<fs::path> missing;
+  for (const fs::path& p : photos)
+    if (!model.image_names.count(p.generic_string())) missing.push_back(p);
+  return missing;
+}
+
+void check_registered(const Context& c, Matcher m, const ModelInfo& best, int min_registered,
+                      const std::vector<fs::path>& photos) {
   if (best.registered >= min_registered) return;
+  SfmResult lost;
+  lost.num_photos = c.num_photos;
+  lost.unregistered = photos_not_in(best, photos);
+  std::string names = describe_lost_photos(lost);
+  if (!names.empty() && names.back() == '\n') names.pop_back();
   fail(SfmErrorKind::TooFewRegistered,
        "only " + std::to_string(best.registered) + " of " + std::to_string(c.num_photos) +
            " photos could be placed (at least " + std::to_string(min_registered) + " needed); " + kPhotoAdvice + "." +
            matcher_hint(m) + " The partial model is kept in " + in_quotes(best.dir) +
            "; to use it anyway, run again with --overwrite --min-registered " + std::to_string(best.registered) +
-           ". Details: " + in_quotes(c.layout.log));
+           ". Details: " + in_quotes(c.layout.log) + "\n" + names);
 }
 
 }  // namespace
@@ -506,7 +534,26 @@ double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos)
   return 0;
 }
 
-std::vector<fs::path> find_photos(const fs::path& dir) { return scan_photos(dir).photos; }
+PhotoScan scan_photos(const fs::path& dir) { return scan_photo_folder(dir); }
+
+std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
+  std::string text;
+  if (!r.skipped.empty()) {
+    text += std::to_string(r.skipped.size()) + " file(s) in the images folder were not used:\n";
+    for (size_t i = 0; i < r.skipped.size() && i < max_names; ++i)
+      text += "  " + r.skipped[i].path.generic_string() + ": " + r.skipped[i].reason + "\n";
+    if (r.skipped.size() > max_names) text += "  ... and " + std::to_string(r.skipped.size() - max_names) + " more\n";
+  }
+  if (!r.unregistered.empty()) {
+    text += std::to_string(r.unregistered.size()) + " of " + std::to_string(r.num_photos) +
+            " photos could not be placed by structure from motion (not in the model, so not trained on):";
+    for (size_t i = 0; i < r.unregistered.size() && i < max_names; ++i)
+      text += (i ? ", " : " ") + r.unregistered[i].generic_string();
+    if (r.unregistered.size() > max_names) text += " ... and " + std::to_string(r.unregistered.size() - max_names) + " more";
+    text += "\n";
+  }
+  return text;
+}
 
 SfmResult run_sfm(const SfmOptions& o) {
   const Stopwatch clock;
@@ -514,7 +561,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   if (o.stage_time_limit_s && !(*o.stage_time_limit_s > 0))
     fail(SfmErrorKind::BadOptions, "the stage time limit must be positive, got " + std::to_string(*o.stage_time_limit_s) + " s");
   const fs::path colmap_exe = require_colmap(o.colmap);
-  const PhotoScan scan = scan_photos(o.images);
+  const PhotoScan scan = scan_photo_folder(o.images);
   check_photos_found(scan, o.images);
   const int num_photos = static_cast<int>(scan.photos.size());
   const int min_registered = resolve_min_registered(o, num_photos);
@@ -546,7 +593,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   SfmProgress done = map.last;
   done.model = 1, done.done = models[0].registered, done.finished = true;
   report(c, done);
-  check_registered(c, matcher, models[0], min_registered);
+  check_registered(c, matcher, models[0], min_registered, scan.photos);
 
   SfmResult r;
   r.images_dir = c.layout.images;
@@ -558,6 +605,8 @@ SfmResult run_sfm(const SfmOptions& o) {
   r.num_registered = models[0].registered;
   r.num_points = models[0].points;
   r.num_models = static_cast<int>(models.size());
+  r.skipped = scan.skipped;
+  r.unregistered = photos_not_in(models[0], scan.photos);
   r.seconds = clock.seconds();
   r.extract_seconds = extract.seconds, r.match_seconds = match.seconds, r.map_seconds = map.seconds;
   return r;

@@ -117,6 +117,12 @@ struct SfmOptions {
   ProgressFn on_progress;               // may be empty
 };
 
+// A file in the images folder that was not handed to colmap, and why (relative path).
+struct SkippedFile {
+  std::filesystem::path path;
+  std::string reason;  // "empty file (0 bytes)", "the JPEG is truncated (...)", ...
+};
+
 struct SfmResult {
   std::filesystem::path images_dir;  // <out>/images
   std::filesystem::path sparse_dir;  // <out>/sparse/0
@@ -124,6 +130,8 @@ struct SfmResult {
   std::filesystem::path log;         // <out>/colmap.log
   Matcher matcher = Matcher::Exhaustive;  // as resolved
   int num_photos = 0;                // readable photos found and handed to colmap
+  std::vector<SkippedFile> skipped;  // files in the images folder that were not photos colmap can use
+  std::vector<std::filesystem::path> unregistered;  // photos handed to colmap that sparse/0 does not hold
   int num_registered = 0;            // photos in sparse/0
   int num_points = 0;                // 3D points in sparse/0
   int num_models = 0;                // models mapper wrote
@@ -131,13 +139,23 @@ struct SfmResult {
   double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // wall time of each stage
 };
 
+// What a run left out, for a person: one line per skipped file with its reason and the names of
+// the photos colmap could not place, at most `max_names` names per list ("… and N more").
+// Empty when nothing was lost.
+std::string describe_lost_photos(const SfmResult& result, size_t max_names = 20);
+
 // Runs the whole pipeline; see the file comment for the layout and errors.
 SfmResult run_sfm(const SfmOptions& options);
 
-// Photos colmap can be given: regular files under `dir` (recursive, hidden entries skipped)
-// with an image extension whose header OpenImageIO can read; paths relative to `dir`, sorted.
-// SfmError(BadImages) when `dir` is missing or not a folder (an empty result is not an error).
-std::vector<std::filesystem::path> find_photos(const std::filesystem::path& dir);
+// The images folder sorted into photos colmap can be given and files it cannot. Photos: regular
+// files under `dir` (recursive, hidden entries skipped) with an image extension that OpenImageIO
+// opens, with pixels, and (JPEG) not truncated. Paths relative to `dir`, sorted. SfmError
+// (BadImages) when `dir` is missing or not a folder (an empty folder is not an error here).
+struct PhotoScan {
+  std::vector<std::filesystem::path> photos;
+  std::vector<SkippedFile> skipped;
+};
+PhotoScan scan_photos(const std::filesystem::path& dir);
 
 using desplat::find_executable;  // subprocess.hpp
 

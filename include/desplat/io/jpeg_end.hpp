@@ -1,6 +1,7 @@
 // Whether a JPEG file's compressed data runs to its end marker. libjpeg (and so OpenImageIO)
 // decodes a truncated JPEG without an error, filling the missing rows with grey: a photo cut
-// short by a failed copy would be trained on as a grey image. Private to the io layer.
+// short by a failed copy would be trained on as a grey image. Used by the image reader and by
+// the photo scan before structure from motion.
 #pragma once
 
 #include <filesystem>
