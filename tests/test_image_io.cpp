@@ -2,6 +2,9 @@
 // greyscale and RGBA files, written here directly with OpenImageIO at known values.
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+
+#include <csignal>
 
 #include <algorithm>
 #include <cmath>
@@ -9,8 +12,10 @@
 #include <fstream>
 
 #include "desplat/io/image_io.hpp"
+#include "desplat/io/photo_file.hpp"
 #include "support/expect.hpp"
 #include "support/fox_scene.hpp"
+#include "support/temp_dir.hpp"
 
 namespace desplat {
 namespace {
@@ -67,6 +72,65 @@ TEST(ImageIo, EightBitRoundTripThroughWriteImage) {
   const FloatImage back = read_image_rgb(temp("rt.png"));
   for (size_t i = 0; i < in.pixels.size(); ++i) EXPECT_NEAR(back.pixels[i], in.pixels[i], 1e-7);
   fs::remove(temp("rt.png"));
+}
+
+// A disk that fills up mid-write, simulated in this process: with SIGXFSZ ignored, a write
+// past the soft RLIMIT_FSIZE fails with EFBIG, as one onto a full disk fails with ENOSPC.
+class FileSizeLimit {
+ public:
+  explicit FileSizeLimit(rlim_t bytes) {
+    old_handler_ = std::signal(SIGXFSZ, SIG_IGN);
+    ::getrlimit(RLIMIT_FSIZE, &old_);
+    const rlimit limited{bytes, old_.rlim_max};
+    ::setrlimit(RLIMIT_FSIZE, &limited);
+  }
+  ~FileSizeLimit() {
+    ::setrlimit(RLIMIT_FSIZE, &old_);
+    std::signal(SIGXFSZ, old_handler_);
+  }
+
+ private:
+  rlimit old_{};
+  void (*old_handler_)(int) = nullptr;
+};
+
+FloatImage noise(int w, int h) {  // incompressible enough to be several kB as PNG
+  FloatImage img{w, h, 3, {}};
+  uint32_t state = 12345;
+  for (int i = 0; i < w * h * 3; ++i) {
+    state = state * 1664525u + 1013904223u;
+    img.pixels.push_back(float(state >> 24) / 255.0f);
+  }
+  return img;
+}
+
+TEST(ImageIo, AFailedWriteIsAnErrorNamingTheFileAndKeepsTheOldOne) {
+  testing::TempDir tmp;
+  const fs::path kept = tmp.path() / "renders" / "view.png", fresh = tmp.path() / "renders" / "new.png";
+  write_image(kept, noise(4, 4));
+  const std::string before = testing::slurp(kept);
+  const FloatImage big = noise(128, 128);
+  std::vector<uint8_t> mask;
+  for (float v : big.pixels) mask.push_back(static_cast<uint8_t>(v * 255));  // noise too
+  mask.resize(128 * 128);
+  std::string render_error, new_error, mask_error;
+  {
+    const FileSizeLimit limit(4096);
+    render_error = testing::error_of<ImageError>([&] { write_image(kept, big); });
+    new_error = testing::error_of<ImageError>([&] { write_image(fresh, big); });
+    mask_error = testing::error_of<ImageError>([&] { write_mask_u8(fresh, 128, 128, mask.data()); });
+  }
+  EXPECT_CONTAINS(render_error, kept.string());
+  EXPECT_CONTAINS(render_error, "File too large");  // the cause, as the system gives it
+  EXPECT_CONTAINS(new_error, fresh.string());
+  EXPECT_CONTAINS(mask_error, "cannot write the mask " + fresh.string());
+  EXPECT_EQ(testing::slurp(kept), before);  // the old file, whole
+  EXPECT_FALSE(fs::exists(fresh));          // no 0-byte or partial file
+  for (const auto& entry : fs::directory_iterator(tmp.path() / "renders"))
+    EXPECT_TRUE(entry.path() == kept) << "left behind: " << entry.path();
+
+  write_image(fresh, big);  // without the limit the same writes succeed
+  EXPECT_EQ(read_image_rgb(fresh).width, 128);
 }
 
 TEST(ImageIo, UnreadableFilesNameTheFile) {

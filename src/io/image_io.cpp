@@ -10,6 +10,7 @@
 #include <string>
 
 #include "desplat/io/jpeg_end.hpp"
+#include "io/image_write_helpers.hpp"
 
 namespace desplat {
 
@@ -49,15 +50,11 @@ void write_image(const std::filesystem::path& path, const FloatImage& image) {
     const float v = std::isfinite(image.pixels[i]) ? std::clamp(image.pixels[i], 0.0f, 1.0f) : 0.0f;
     bytes[i] = static_cast<uint8_t>(std::lround(v * 255.0f));
   }
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-  auto out = OIIO::ImageOutput::create(path.string());
   OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::UINT8);
   // Our RGBA is straight (unassociated) alpha, as PNG stores it: without this OIIO would
   // treat it as premultiplied and divide the colors by alpha once more.
   spec.attribute("oiio:UnassociatedAlpha", 1);
-  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, bytes.data()) ||
-      !out->close())
-    throw ImageError("cannot write image " + path.string() + ": " + OIIO::geterror());
+  write_encoded_image(path, spec, OIIO::TypeDesc::UINT8, bytes.data());
 }
 
 }  // namespace desplat

@@ -4,6 +4,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "io/image_read_helpers.hpp"
+#include "io/image_write_helpers.hpp"
 
 namespace desplat {
 
@@ -40,17 +41,12 @@ void write_photo_file(const std::filesystem::path& path, const PhotoFile& p) {
     spec.attribute("Compression", "jpeg:95");
     spec.attribute("jpeg:subsampling", "4:4:4");  // no chroma bleeding across edited edges
   }
-  auto out = OIIO::ImageOutput::create(path.string());
-  if (!out || !out->open(path.string(), spec) ||
-      !out->write_image(OIIO::TypeDesc::FLOAT, p.image.pixels.data()) || !out->close())
-    throw ImageError(path.string() + ": cannot write the image: " + OIIO::geterror());
+  write_encoded_image(path, spec, OIIO::TypeDesc::FLOAT, p.image.pixels.data());
 }
 
 void write_mask_u8(const std::filesystem::path& path, int width, int height, const uint8_t* pixels) {
-  auto out = OIIO::ImageOutput::create(path.string());
-  const OIIO::ImageSpec spec(width, height, 1, OIIO::TypeDesc::UINT8);
-  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, pixels) || !out->close())
-    throw ImageError(path.string() + ": cannot write the mask: " + OIIO::geterror());
+  write_encoded_image(path, OIIO::ImageSpec(width, height, 1, OIIO::TypeDesc::UINT8), OIIO::TypeDesc::UINT8, pixels,
+                      "mask");
 }
 
 }  // namespace desplat

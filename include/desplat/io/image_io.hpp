@@ -18,8 +18,9 @@ struct ImageError : std::runtime_error {
 // Throws ImageError naming the file when it cannot be read.
 FloatImage read_image_rgb(const std::filesystem::path& path);
 
-// Writes an 8-bit PNG (or any format by extension), clamping to [0, 1] and rounding.
-// Throws ImageError naming the file on failure.
+// Writes an 8-bit PNG (or JPEG, by extension), clamping to [0, 1] and rounding. The file is
+// encoded in memory and replaced atomically with every write checked (atomic_file.hpp): on a
+// full disk the old file, or none, stays. Throws ImageError naming the file on failure.
 void write_image(const std::filesystem::path& path, const FloatImage& image);
 
 }  // namespace desplat
