@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Fuzzes the COLMAP binary readers and the 3DGS PLY reader with libFuzzer (not part of CI:
-# it is slow by design). Builds a separate clang + ASan/UBSan tree in build/fuzz, seeds the
+# Fuzzes the COLMAP binary readers and the 3DGS PLY reader with libFuzzer. CI runs it for 60 s
+# per harness as the ctest test fuzz_harnesses; run it longer by hand to search deeper. Builds a separate clang + ASan/UBSan tree in build/fuzz, seeds the
 # corpora with files written by the project (and the fox model's .bin files when
 # ../shared/data/fox/sparse/0 exists), then runs each harness for a bounded time, one at a
 # time (the machines have 2 cores).
