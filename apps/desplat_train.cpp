@@ -22,6 +22,9 @@ int main(int argc, char** argv) {
   auto* data = app.add_option("--data", o.data_dir, "scene folder with images/ and sparse/0/");
   auto* images = app.add_option("--images", o.images_dir, "folder of photos without a model: run COLMAP SfM first");
   data->excludes(images);
+  app.add_option("--masks", o.masks_dir,
+                 "folder of masks, one PNG per photo named like it (0002.jpg.png or 0002.png), black = ignore "
+                 "the pixel in training and metrics (default: the scene's masks/ folder when it exists)");
   app.add_option("--out", o.out_dir, "output folder")->required();
   app.add_option("--config", o.config_file, "JSON file overriding training settings (see config.json of any run)")
       ->check(CLI::ExistingFile);

@@ -115,5 +115,119 @@ TEST(Loss, RejectsBadSizes) {
   EXPECT_THROW(photometric_loss(c, d, 12, 12, 0.2f, {}), std::invalid_argument);
 }
 
+// ---- The user's mask (keep: 1 = use, 0 = ignore) -------------------------------------------
+
+// The masked loss from its definition: L1 over kept pixels; SSIM of keep·x against keep·y,
+// averaged over the window positions whose center is kept.
+double reference_masked_loss(const std::vector<double>& x, const std::vector<double>& y, const std::vector<float>& keep,
+                             int w, int h, double lambda) {
+  double l1 = 0, n = 0;
+  for (size_t i = 0; i < x.size(); ++i) l1 += keep[i / 3] * std::abs(x[i] - y[i]), n += keep[i / 3];
+  std::vector<double> kx(x.size()), ky(y.size());
+  for (size_t i = 0; i < x.size(); ++i) kx[i] = keep[i / 3] * x[i], ky[i] = keep[i / 3] * y[i];
+  double g1[11], sum = 0;
+  for (int i = 0; i < 11; ++i) sum += g1[i] = std::exp(-0.5 * (i - 5) * (i - 5) / (1.5 * 1.5));
+  double total = 0, count = 0;
+  for (int ch = 0; ch < 3; ++ch)
+    for (int oy = 0; oy + 11 <= h; ++oy)
+      for (int ox = 0; ox + 11 <= w; ++ox) {
+        if (keep[(oy + 5) * w + ox + 5] == 0) continue;
+        double mx = 0, my = 0, xx = 0, yy = 0, xy = 0;
+        for (int i = 0; i < 11; ++i)
+          for (int j = 0; j < 11; ++j) {
+            const double wgt = g1[i] * g1[j] / (sum * sum);
+            const double a = kx[3 * ((oy + i) * w + ox + j) + ch], b = ky[3 * ((oy + i) * w + ox + j) + ch];
+            mx += wgt * a, my += wgt * b, xx += wgt * a * a, yy += wgt * b * b, xy += wgt * a * b;
+          }
+        const double sx = xx - mx * mx, sy = yy - my * my, sxy = xy - mx * my;
+        total += ((2 * mx * my + 1e-4) * (2 * sxy + 9e-4)) / ((mx * mx + my * my + 1e-4) * (sx + sy + 9e-4));
+        ++count;
+      }
+  return (1 - lambda) * l1 / n + lambda * (1 - total / count);
+}
+
+// A blob of ignored pixels in a corner (covering some window centers, not all) plus a few
+// scattered ones.
+std::vector<float> test_mask(int w, int h) {
+  std::vector<float> keep(size_t(w) * h, 1.0f);
+  for (int y = 1; y < 6 && y < h; ++y)
+    for (int x = 1; x < 8 && x < w; ++x) keep[y * w + x] = 0;
+  for (int i = 0; i < w * h; i += 13) keep[i] = 0;
+  return keep;
+}
+
+TEST(MaskedLoss, ValueMatchesItsDefinition) {
+  for (auto [w, h] : {std::pair{17, 14}, std::pair{31, 23}}) {
+    const Images im = random_images(w, h, 21);
+    const std::vector<float> keep = test_mask(w, h);
+    const std::vector<double> x(im.render.begin(), im.render.end()), y(im.target.begin(), im.target.end());
+    const PhotometricLoss got = photometric_loss(im.render, im.target, w, h, 0.2f, {}, keep);
+    EXPECT_NEAR(got.loss, reference_masked_loss(x, y, keep, w, h, 0.2), 2e-5) << w << "x" << h;
+    EXPECT_NEAR(ssim(im.render, im.target, w, h, keep), got.ssim, 1e-12);
+    // PSNR over the kept pixels only: the same as PSNR of the kept pixels gathered.
+    std::vector<float> a, b;
+    for (size_t i = 0; i < im.render.size(); ++i)
+      if (keep[i / 3] != 0) a.push_back(im.render[i]), b.push_back(im.target[i]);
+    EXPECT_NEAR(psnr(im.render, im.target, keep), psnr(a, b), 1e-9);
+  }
+}
+
+TEST(MaskedLoss, GradientMatchesFiniteDifferencesAndIsZeroOnIgnoredPixels) {
+  const int w = 17, h = 14;
+  const Images im = random_images(w, h, 9);
+  const std::vector<float> keep = test_mask(w, h);
+  std::vector<float> grad(im.render.size());
+  photometric_loss(im.render, im.target, w, h, 0.2f, grad, keep);
+  std::vector<double> x(im.render.begin(), im.render.end());
+  const std::vector<double> y(im.target.begin(), im.target.end());
+  double scale = 0;
+  std::vector<double> numeric(x.size());
+  for (size_t i = 0; i < x.size(); ++i) {  // as in Loss.GradientMatchesFiniteDifferences
+    const double v = x[i];
+    x[i] = v + 1e-4;
+    const double lp = reference_masked_loss(x, y, keep, w, h, 0.2);
+    x[i] = v - 1e-4;
+    const double lm = reference_masked_loss(x, y, keep, w, h, 0.2);
+    x[i] = v;
+    numeric[i] = (lp - lm) / 2e-4;
+    scale = std::max(scale, std::abs(numeric[i]));
+  }
+  for (size_t i = 0; i < x.size(); ++i) {
+    EXPECT_NEAR(grad[i], numeric[i], 1e-3 * scale) << i;
+    if (keep[i / 3] == 0) {
+      EXPECT_EQ(grad[i], 0.0f) << i;
+    }
+  }
+}
+
+TEST(MaskedLoss, IgnoredPixelsHaveNoInfluenceAndAllKeptIsTheUnmaskedLoss) {
+  const int w = 23, h = 19;
+  const Images im = random_images(w, h, 4);
+  const std::vector<float> keep = test_mask(w, h);
+  Images painted = im;  // anything at all where the mask says ignore, in both images
+  for (size_t i = 0; i < painted.render.size(); ++i)
+    if (keep[i / 3] == 0) painted.render[i] = 7.0f, painted.target[i] = float(i % 5);
+  std::vector<float> g1(im.render.size()), g2(im.render.size());
+  const PhotometricLoss a = photometric_loss(im.render, im.target, w, h, 0.2f, g1, keep);
+  const PhotometricLoss b = photometric_loss(painted.render, painted.target, w, h, 0.2f, g2, keep);
+  EXPECT_EQ(a.loss, b.loss);
+  EXPECT_EQ(g1, g2);
+  EXPECT_EQ(psnr(im.render, im.target, keep), psnr(painted.render, painted.target, keep));
+
+  const std::vector<float> all(size_t(w) * h, 1.0f);
+  std::vector<float> g3(im.render.size()), g4(im.render.size());
+  const PhotometricLoss plain = photometric_loss(im.render, im.target, w, h, 0.2f, g3);
+  const PhotometricLoss ones = photometric_loss(im.render, im.target, w, h, 0.2f, g4, all);
+  EXPECT_EQ(plain.loss, ones.loss);
+  EXPECT_EQ(g3, g4);
+
+  const std::vector<float> none(size_t(w) * h, 0.0f);  // nothing kept: no loss, no gradient
+  std::vector<float> g5(im.render.size(), 1.0f);
+  EXPECT_EQ(photometric_loss(im.render, im.target, w, h, 0.2f, g5, none).loss, 0.0);
+  for (float g : g5) EXPECT_EQ(g, 0.0f);
+  std::vector<float> short_mask(10);
+  EXPECT_THROW(photometric_loss(im.render, im.target, w, h, 0.2f, {}, short_mask), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace desplat

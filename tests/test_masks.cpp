@@ -17,6 +17,7 @@
 #include "desplat/io/masks.hpp"
 #include "desplat/io/scene.hpp"
 #include "desplat/io/undistort.hpp"
+#include "desplat/jobs/training_run.hpp"
 #include "support/expect.hpp"
 #include "support/look_at.hpp"
 #include "support/temp_dir.hpp"
@@ -223,6 +224,131 @@ TEST(LoadViewMask, BadMasksNameTheFile) {
   EXPECT_CONTAINS(wrong_size, "64x48");
   EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_mask(scene, 1); }), "distractor_masks/view_1.png");
   EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_mask(scene, 7); }), "does not exist");
+}
+
+// ---- User masks (pixels to ignore) --------------------------------------------------------------
+
+// A black rectangle [x0, x0 + w) × [y0, y0 + h) on white, photo-sized; `grey_edge` puts 0.4 and
+// 0.6 grey columns left and right of it (an editor's anti-aliasing: 0.4 → ignore, 0.6 → use).
+FloatImage user_mask(int x0, int y0, int w, int h, bool grey_edge = false) {
+  FloatImage m{kW, kH, 1, std::vector<float>(kW * kH, 1.0f)};
+  for (int y = y0; y < y0 + h; ++y) {
+    for (int x = x0; x < x0 + w; ++x) m.pixels[y * kW + x] = 0.0f;
+    if (grey_edge) m.pixels[y * kW + x0 - 1] = 0.4f, m.pixels[y * kW + x0 + w] = 0.6f;
+  }
+  return m;
+}
+
+// The capture with a PINHOLE lens: training pixels are the photo's pixels (downscale 1) or
+// their 2×2 blocks (downscale 2), so which pixels must be ignored can be counted by hand.
+void use_pinhole_lens(MaskedCapture& c) {
+  colmap::Model m = distorted_model();
+  m.cameras[1] = colmap::Camera{1, CameraModelId::Pinhole, kW, kH, {50.0, 52.0, 32.0, 24.0}};
+  colmap::write_model_binary(m, c.dir.path() / "sparse/0");
+}
+
+TEST(UserMasks, FoundByEitherNameConventionWithAWarningForPhotosWithout) {
+  MaskedCapture c;
+  write_masked_capture(c, false);
+  write_image(c.dir.path() / "masks/view_0.png.png", user_mask(5, 5, 4, 4));  // COLMAP: <name>.png
+  write_image(c.dir.path() / "masks/view_1.png", user_mask(5, 5, 4, 4));      // nerfstudio: <stem>.png
+  std::vector<std::string> warnings;
+  SceneOptions o = all_train(c.cache.path(), 1);
+  o.on_warning = [&](const std::string& w) { warnings.push_back(w); };
+  const Scene scene = load_colmap_scene(c.dir.path(), o);
+  EXPECT_EQ(scene.masks_dir, scene.data_dir / "masks");
+  EXPECT_EQ(scene.views[0].user_mask_path, scene.data_dir / "masks/view_0.png.png");
+  EXPECT_EQ(scene.views[1].user_mask_path, scene.data_dir / "masks/view_1.png");
+  EXPECT_TRUE(scene.views[2].user_mask_path.empty());
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_CONTAINS(warnings[0], "has no mask for 1 of 3 photos; every pixel of those is used");
+
+  // --masks elsewhere; a folder that is not there, or holds no photo's mask, is an error.
+  TempDir elsewhere{"user_masks"};
+  write_image(elsewhere.path() / "view_2.png", user_mask(5, 5, 4, 4));
+  o.masks_dir = elsewhere.path();
+  const Scene other = load_colmap_scene(c.dir.path(), o);
+  EXPECT_TRUE(other.views[0].user_mask_path.empty());
+  EXPECT_EQ(other.views[2].user_mask_path, elsewhere.path() / "view_2.png");
+  o.masks_dir = elsewhere.path() / "missing";
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(c.dir.path(), o); }),
+                  "the masks folder " + (elsewhere.path() / "missing").string() + " does not exist");
+  fs::remove(elsewhere.path() / "view_2.png");
+  write_image(elsewhere.path() / "unrelated.png", user_mask(5, 5, 4, 4));
+  o.masks_dir = elsewhere.path();
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(c.dir.path(), o); }), "holds no mask for any photo");
+
+  // Without a masks/ folder nothing is masked.
+  fs::remove_all(c.dir.path() / "masks");
+  const Scene none = load_colmap_scene(c.dir.path(), all_train(c.cache.path(), 1));
+  EXPECT_TRUE(none.masks_dir.empty());
+  for (const SceneView& v : none.views) EXPECT_TRUE(v.user_mask_path.empty());
+}
+
+TEST(UserMasks, ATrainingPixelIsKeptOnlyWhenAllItCoversIsKept) {
+  MaskedCapture c;
+  write_masked_capture(c, false);
+  use_pinhole_lens(c);
+  write_image(c.dir.path() / "masks/view_0.png.png", user_mask(9, 7, 5, 6, /*grey_edge=*/true));
+  for (int downscale : {1, 2}) {
+    const Scene scene = load_colmap_scene(c.dir.path(), all_train(c.cache.path(), downscale));
+    const std::vector<float> keep = load_view_keep_mask(scene, 0);
+    const int w = kW / downscale, h = kH / downscale;
+    ASSERT_EQ(keep.size(), size_t(w) * h);
+    // Photo pixels ignored: x in [8, 14) (the black columns plus the 0.4 grey one left of
+    // them; the 0.6 one right of them is used), y in [7, 13). A training pixel is ignored when
+    // its block touches one.
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        bool touches = false;
+        for (int dy = 0; dy < downscale; ++dy)
+          for (int dx = 0; dx < downscale; ++dx) {
+            const int px = x * downscale + dx, py = y * downscale + dy;
+            touches |= px >= 8 && px < 14 && py >= 7 && py < 13;
+          }
+        EXPECT_EQ(keep[size_t(y) * w + x], touches ? 0.0f : 1.0f) << x << "," << y << " downscale " << downscale;
+      }
+  }
+}
+
+TEST(UserMasks, AMaskOfTheWrongSizeOrUnreadableNamesTheFile) {
+  MaskedCapture c;
+  write_masked_capture(c, false);
+  write_image(c.dir.path() / "masks/view_0.png", FloatImage{10, 12, 1, std::vector<float>(120, 1.0f)});
+  std::ofstream(c.dir.path() / "masks/view_1.png.png") << "not a png";
+  const Scene scene = load_colmap_scene(c.dir.path(), all_train(c.cache.path(), 1));
+  const std::string wrong_size = error_of<SceneError>([&] { load_view_keep_mask(scene, 0); });
+  EXPECT_CONTAINS(wrong_size, (scene.data_dir / "masks/view_0.png").string() + ": mask is 10x12 px but the photo 'view_0.png' is 64x48 px");
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_keep_mask(scene, 1); }), "masks/view_1.png.png: cannot read the mask");
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_keep_mask(scene, 2); }), "has no mask of pixels to ignore");
+  // Training reports one of them (views load in parallel) before its first step.
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_training_data(scene); }), (scene.data_dir / "masks/view_").string());
+}
+
+// What training is handed: the mask, and zeros where it ignores (the photo there is never read).
+TEST(UserMasks, TrainingDataCarriesTheMaskAndZeroesIgnoredPixels) {
+  MaskedCapture c;
+  write_masked_capture(c, false);
+  use_pinhole_lens(c);
+  write_image(c.dir.path() / "masks/view_1.png", user_mask(20, 10, 6, 4));
+  const Scene scene = load_colmap_scene(c.dir.path(), all_train(c.cache.path(), 1));
+  const TrainingData data = load_training_data(scene);
+  ASSERT_EQ(data.train.size(), 3u);
+  EXPECT_TRUE(data.train[0].keep.empty());
+  const TrainView& v = data.train[1];
+  ASSERT_EQ(v.keep.size(), size_t(kW * kH));
+  int ignored = 0;
+  for (int p = 0; p < kW * kH; ++p) {
+    const bool inside = p % kW >= 20 && p % kW < 26 && p / kW >= 10 && p / kW < 14;
+    EXPECT_EQ(v.keep[p], inside ? 0.0f : 1.0f) << p;
+    if (inside) {
+      ++ignored;
+      EXPECT_EQ(v.image.pixels[3 * p] + v.image.pixels[3 * p + 1] + v.image.pixels[3 * p + 2], 0.0f) << p;
+    } else {
+      EXPECT_NEAR(v.image.pixels[3 * p], c.patterns[1].pixels[p], 1e-6f) << p;
+    }
+  }
+  EXPECT_EQ(ignored, 24);
 }
 
 }  // namespace

@@ -21,18 +21,18 @@ namespace {
 
 // The first channel of any image file, scaled to [0, 1] by its format's full range.
 // Values as stored (unassociated_alpha).
-FloatImage read_first_channel(const fs::path& path) {
+FloatImage read_first_channel(const fs::path& path, const std::string& kind) {
   const OIIO::ImageSpec config = unassociated_alpha();
   auto in = OIIO::ImageInput::open(path.string(), &config);
-  if (!in) throw SceneError(path.string() + ": cannot read the distractor mask: " + OIIO::geterror());
+  if (!in) throw SceneError(path.string() + ": cannot read the " + kind + ": " + OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
-    throw SceneError(path.string() + ": the distractor mask has no pixels");
+    throw SceneError(path.string() + ": the " + kind + " has no pixels");
   FloatImage mask{spec.width, spec.height, 1, std::vector<float>(size_t(spec.width) * spec.height)};
   if (!in->read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, mask.pixels.data()))
-    throw SceneError(path.string() + ": cannot decode the distractor mask: " + in->geterror());
+    throw SceneError(path.string() + ": cannot decode the " + kind + ": " + in->geterror());
   for (float& v : mask.pixels) {
-    if (!std::isfinite(v)) throw SceneError(path.string() + ": the distractor mask contains NaN or Inf");
+    if (!std::isfinite(v)) throw SceneError(path.string() + ": the " + kind + " contains NaN or Inf");
     v = std::clamp(v, 0.0f, 1.0f);  // float files may hold anything; the convention is [0, 1]
   }
   return mask;
@@ -44,24 +44,51 @@ fs::path distractor_mask_path(const fs::path& data_dir, const std::string& image
   return data_dir / "distractor_masks" / fs::path(image_name).replace_extension(".png");
 }
 
-FloatImage load_view_mask(const Scene& scene, size_t view) {
+namespace {
+
+const SceneView& view_at(const Scene& scene, size_t view) {
   if (view >= scene.views.size())
     throw SceneError("view " + std::to_string(view) + " does not exist (the scene has " +
                      std::to_string(scene.views.size()) + ")");
-  const SceneView& v = scene.views[view];
-  if (v.mask_path.empty())
-    throw SceneError(distractor_mask_path(scene.data_dir, v.name).string() + ": view '" + v.name +
-                     "' has no distractor mask");
-  FloatImage mask = read_first_channel(v.mask_path);
+  return scene.views[view];
+}
+
+// A photo-sized mask read from `path` through the geometry of load_view_image (scene.hpp:
+// resize, then undistort), as [0, 1] values at the training size.
+FloatImage to_training_geometry(const SceneView& v, FloatImage mask, const fs::path& path, const std::string& kind) {
   if (mask.width != v.photo_width || mask.height != v.photo_height)
-    throw SceneError(v.mask_path.string() + ": distractor mask is " + size_text(mask.width, mask.height) +
-                     " px but the photo '" + v.name + "' is " + size_text(v.photo_width, v.photo_height) + " px");
-  try {  // the geometry of load_view_image (scene.hpp: resize, then undistort)
+    throw SceneError(path.string() + ": " + kind + " is " + size_text(mask.width, mask.height) + " px but the photo '" +
+                     v.name + "' is " + size_text(v.photo_width, v.photo_height) + " px");
+  try {
     mask = resize_area(mask, int(v.distorted_camera.width), int(v.distorted_camera.height));
     return undistort_image(mask, v.distorted_camera, v.undistorted_camera);
   } catch (const std::invalid_argument& e) {
-    throw SceneError(v.mask_path.string() + ": " + e.what());
+    throw SceneError(path.string() + ": " + e.what());
   }
+}
+
+}  // namespace
+
+FloatImage load_view_mask(const Scene& scene, size_t view) {
+  const SceneView& v = view_at(scene, view);
+  if (v.mask_path.empty())
+    throw SceneError(distractor_mask_path(scene.data_dir, v.name).string() + ": view '" + v.name +
+                     "' has no distractor mask");
+  return to_training_geometry(v, read_first_channel(v.mask_path, "distractor mask"), v.mask_path, "distractor mask");
+}
+
+std::vector<float> load_view_keep_mask(const Scene& scene, size_t view) {
+  const SceneView& v = view_at(scene, view);
+  if (v.user_mask_path.empty()) throw SceneError("view '" + v.name + "' has no mask of pixels to ignore");
+  // Binarize at the photo's resolution first, so "black = ignore" means the same whatever
+  // grey levels an editor left on the edges.
+  FloatImage photo_mask = read_first_channel(v.user_mask_path, "mask");
+  for (float& m : photo_mask.pixels) m = m > 0.5f ? 1.0f : 0.0f;
+  const FloatImage mask = to_training_geometry(v, std::move(photo_mask), v.user_mask_path, "mask");
+  // Kept only when all that contributes is kept (a mean of ones is 1 up to float rounding).
+  std::vector<float> keep(mask.pixels.size());
+  for (size_t i = 0; i < keep.size(); ++i) keep[i] = mask.pixels[i] >= 1.0f - 1e-5f ? 1.0f : 0.0f;
+  return keep;
 }
 
 MaskScore score_mask(std::span<const float> predicted, std::span<const float> truth, float threshold) {

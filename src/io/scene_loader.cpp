@@ -304,6 +304,27 @@ fs::path existing_mask(const fs::path& data, const std::string& image_name) {
   return fs::is_regular_file(mask, ec) ? mask : fs::path();
 }
 
+// The user's masks folder: the one given (it must exist), else <data>/masks when present.
+fs::path user_masks_dir(const fs::path& data, const SceneOptions& options) {
+  std::error_code ec;
+  if (!options.masks_dir.empty()) {
+    const fs::path dir = fs::absolute(options.masks_dir).lexically_normal();
+    if (!fs::is_directory(dir, ec)) throw SceneError("the masks folder " + dir.string() + " does not exist");
+    return dir;
+  }
+  return fs::is_directory(data / "masks", ec) ? data / "masks" : fs::path();
+}
+
+// <dir>/<name>.png (COLMAP's naming), else <dir>/<name with .png for its extension>
+// (nerfstudio's); empty when neither exists.
+fs::path existing_user_mask(const fs::path& dir, const std::string& image_name) {
+  if (dir.empty()) return {};
+  std::error_code ec;
+  for (const fs::path& candidate : {dir / (image_name + ".png"), dir / fs::path(image_name).replace_extension(".png")})
+    if (fs::is_regular_file(candidate, ec)) return candidate;
+  return {};
+}
+
 }  // namespace
 
 std::vector<size_t> Scene::train_views() const {
@@ -357,6 +378,8 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     if (roles[i] != ViewRole::Unused) used.push_back(images[i]);
 
   const Source source = choose_source(data, options, model_images_file(sparse), model, used, scene);
+  const fs::path masks_dir = user_masks_dir(data, options);
+  scene.masks_dir = masks_dir;
   for (size_t i = 0; i < images.size(); ++i) {
     if (roles[i] == ViewRole::Unused) continue;
     const colmap::Image& image = *images[i];
@@ -375,6 +398,7 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     v.photo_width = int(lens.width);
     v.photo_height = int(lens.height);
     v.mask_path = existing_mask(data, image.name);
+    v.user_mask_path = existing_user_mask(masks_dir, image.name);
     v.distorted_camera = w == lens.width && h == lens.height ? lens : rescale_camera(lens, w, h);
     try {
       v.undistorted_camera = undistort_camera(v.distorted_camera, options.undistort);
@@ -383,6 +407,17 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     }
     v.camera = view_camera(image, v.undistorted_camera, scene.normalization);
     scene.views.push_back(std::move(v));
+  }
+  if (!masks_dir.empty()) {
+    const auto unmasked = std::count_if(scene.views.begin(), scene.views.end(),
+                                        [](const SceneView& v) { return v.user_mask_path.empty(); });
+    if (unmasked == static_cast<long>(scene.views.size()))
+      throw SceneError("the masks folder " + masks_dir.string() + " holds no mask for any photo (expected e.g. " +
+                       (masks_dir / (scene.views.front().name + ".png")).string() + ")");
+    if (unmasked > 0)
+      warn(options.on_warning, &scene.warnings,
+           masks_dir.string() + " has no mask for " + std::to_string(unmasked) + " of " +
+               std::to_string(scene.views.size()) + " photos; every pixel of those is used");
   }
   add_points(model, sparse, options, scene);
   return scene;

@@ -49,6 +49,7 @@ SceneRecipe SceneRecipe::of(const Scene& scene, const fs::path& data_dir, const 
   for (fs::path* p : {&r.split.train_list, &r.split.test_list, &r.split.tsv})
     if (!p->empty()) *p = fs::absolute(*p).lexically_normal();
   for (const SceneView& v : scene.views) (v.is_test ? r.test_views : r.train_views).push_back(v.name);
+  r.masks_dir = scene.masks_dir;
   return r;
 }
 
@@ -80,6 +81,9 @@ std::string SceneRecipe::difference(const SceneRecipe& other) const {
   if (test_views != other.test_views)
     return "the test views differ (" + std::to_string(test_views.size()) + " then, " +
            std::to_string(other.test_views.size()) + " now)";
+  if (masks_dir != other.masks_dir)
+    return "the masks were " + (masks_dir.empty() ? std::string("none") : masks_dir.string()) + ", now " +
+           (other.masks_dir.empty() ? std::string("none") : other.masks_dir.string());
   return "";
 }
 
@@ -92,11 +96,13 @@ json SceneRecipe::to_json() const {
   if (split.test_names) split_json["test_names"] = *split.test_names;
   if (split.clutter_ratio) split_json["clutter_ratio"] = *split.clutter_ratio;
   if (!split.tsv.empty()) split_json["tsv"] = split.tsv.string();
-  return {{"data_dir", data_dir.string()},
-          {"downscale", downscale},
-          {"split", split_json},
-          {"train_views", train_views},
-          {"test_views", test_views}};
+  json j = {{"data_dir", data_dir.string()},
+            {"downscale", downscale},
+            {"split", split_json},
+            {"train_views", train_views},
+            {"test_views", test_views}};
+  if (!masks_dir.empty()) j["masks_dir"] = masks_dir.string();
+  return j;
 }
 
 SceneRecipe SceneRecipe::from_json(const json& j) {
@@ -115,6 +121,7 @@ SceneRecipe SceneRecipe::from_json(const json& j) {
     r.split.tsv = s.value("tsv", std::string());
     r.train_views = j.at("train_views").get<std::vector<std::string>>();
     r.test_views = j.at("test_views").get<std::vector<std::string>>();
+    r.masks_dir = j.value("masks_dir", std::string());
   } catch (const json::exception& e) {
     throw std::invalid_argument(std::string("scene recipe: ") + e.what());
   } catch (const SplitError& e) {

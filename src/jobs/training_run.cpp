@@ -165,7 +165,13 @@ TrainingData load_training_data(const Scene& scene) {
 #pragma omp parallel for schedule(dynamic)
   for (size_t i = 0; i < scene.views.size(); ++i) {
     try {
-      views[i] = {scene.views[i].name, scene.views[i].camera, load_view_image(scene, i)};
+      views[i] = {scene.views[i].name, scene.views[i].camera, load_view_image(scene, i), {}};
+      if (!scene.views[i].user_mask_path.empty()) {
+        views[i].keep = load_view_keep_mask(scene, i);
+        // What the mask hides is never read: zero it, so no rule can use it by accident.
+        for (size_t p = 0; p < views[i].keep.size(); ++p)
+          if (views[i].keep[p] == 0) views[i].image.pixels[3 * p] = views[i].image.pixels[3 * p + 1] = views[i].image.pixels[3 * p + 2] = 0;
+      }
     } catch (const std::exception& e) {
 #pragma omp critical
       error = e.what();
@@ -276,6 +282,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   SceneOptions scene_options;
   scene_options.downscale = opt.downscale;
   scene_options.split = opt.split;
+  scene_options.masks_dir = opt.masks_dir;
   const Scene scene = load_colmap_scene(data_dir, scene_options);
   const ModelFolder model(opt.out_dir);
   const SceneRecipe recipe = SceneRecipe::of(scene, data_dir, scene_options);
@@ -292,6 +299,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
+  if (!scene.masks_dir.empty()) {
+    const auto masked = std::count_if(scene.views.begin(), scene.views.end(),
+                                      [](const SceneView& v) { return !v.user_mask_path.empty(); });
+    std::printf("masks from %s for %ld of %zu views: their black pixels are ignored in training and metrics\n",
+                scene.masks_dir.c_str(), static_cast<long>(masked), scene.views.size());
+  }
   if (config.distractors.enabled)
     std::printf("DeSplat: %d distractor Gaussians per training view%s%s\n",
                 data.train.empty() ? 0 : distractor_count_for(data.train[0].camera, config.distractors),
@@ -332,6 +345,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
   const int64_t first = trainer.current_step();
+  // The training curve for report.html: mean loss and PSNR over each interval, about 200 points.
+  const int64_t curve_every = std::max<int64_t>(1, config.iterations / 200);
+  double curve_loss = 0, curve_psnr = 0;
+  int curve_steps = 0;
   while (trainer.current_step() < config.iterations) {
     if (stop_requested.load()) {
       save();
@@ -356,6 +373,17 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
     const int64_t done = trainer.current_step();
+    curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
+    if (done % curve_every == 0 || done == config.iterations) {
+      history.push_back({{"kind", "training"},
+                         {"step", done},
+                         {"wall_seconds", elapsed},
+                         {"loss", curve_loss / curve_steps},
+                         {"psnr", curve_psnr / curve_steps},
+                         {"gaussians", s.gaussians},
+                         {"distractor_gaussians", trainer.distractor_count()}});
+      curve_loss = curve_psnr = 0, curve_steps = 0;
+    }
     if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       json point = {{"kind", "evaluation"},

@@ -62,23 +62,32 @@ void composite_layers_backward(Layer s, Layer d, const std::array<float, 3>& bg,
 }
 
 double alpha_regularizers(Layer s, Layer d, float lambda_s, float lambda_d, std::span<float> d_as,
-                          std::span<float> d_ad) {
+                          std::span<float> d_ad, std::span<const float> keep) {
   const size_t pixels = s.alpha.size();
   if (pixels == 0) return 0;
-  if (d_as.size() != pixels || (has(d) && (d.alpha.size() != pixels || d_ad.size() != pixels)))
+  if (d_as.size() != pixels || (has(d) && (d.alpha.size() != pixels || d_ad.size() != pixels)) ||
+      (!keep.empty() && keep.size() != pixels))
     throw std::invalid_argument("alpha_regularizers: sizes disagree");
+  double kept = double(pixels);
+  if (!keep.empty()) {
+    kept = 0;
+    for (float k : keep) kept += k;
+    if (kept == 0) return 0;
+  }
   double sum_s = 0, sum_d = 0;
-  const float gs = -lambda_s / float(pixels), gd = lambda_d / float(pixels);
+  const float gs = -lambda_s / float(kept), gd = lambda_d / float(kept);
   for (size_t p = 0; p < pixels; ++p) {
-    sum_s += 1.0 - s.alpha[p];
-    d_as[p] += gs;
+    const float k = keep.empty() ? 1.0f : keep[p];
+    sum_s += k * (1.0 - s.alpha[p]);
+    d_as[p] += k * gs;
   }
   if (has(d))
     for (size_t p = 0; p < pixels; ++p) {
-      sum_d += d.alpha[p];
-      d_ad[p] += gd;
+      const float k = keep.empty() ? 1.0f : keep[p];
+      sum_d += k * d.alpha[p];
+      d_ad[p] += k * gd;
     }
-  return (lambda_s * sum_s + lambda_d * sum_d) / double(pixels);
+  return (lambda_s * sum_s + lambda_d * sum_d) / kept;
 }
 
 FloatImage composite_over_background(const RasterOutput& r, const std::array<float, 3>& background) {

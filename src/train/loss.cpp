@@ -99,11 +99,22 @@ struct SsimScratch {
 // Mean SSIM over valid positions and channels; when d_x is given, adds
 // scale·∂SSIM/∂x to it ([H, W, 3]). The channels run one after another, each filter
 // split over the threads by rows.
+// With `keep` ([H, W] in {0, 1}) both images are multiplied by it first, so an ignored pixel
+// reads 0 in both whatever it holds, and the mean runs over the positions whose window center
+// is kept: an ignored pixel has no influence on the value and gets no gradient.
 double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int w, int h, float scale,
-                         float* d_x) {
+                         float* d_x, const float* keep = nullptr) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
   const size_t n_out = size_t(ow) * oh, n_in = size_t(w) * h;
-  const double count = double(n_out) * 3;
+  constexpr int kHalf = kWindow / 2;
+  double kept_positions = double(n_out);
+  if (keep) {
+    kept_positions = 0;
+    for (int qy = 0; qy < oh; ++qy)
+      for (int qx = 0; qx < ow; ++qx) kept_positions += keep[size_t(qy + kHalf) * w + qx + kHalf];
+    if (kept_positions == 0) return 1.0;  // nothing to compare: no loss, no gradient
+  }
+  const double count = kept_positions * 3;
   thread_local SsimScratch scratch;
   SsimScratch& b = scratch;  // the calling thread's; the parallel loops below share it
   for (auto* v : {&b.px, &b.py, &b.pxx, &b.pyy, &b.pxy, &b.gmx, &b.gxx, &b.gxy}) v->resize(n_in);
@@ -113,7 +124,8 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
   for (int ch = 0; ch < 3; ++ch) {
 #pragma omp parallel for schedule(static)
     for (size_t p = 0; p < n_in; ++p) {
-      const float xv = x[3 * p + ch], yv = y[3 * p + ch];
+      const float k = keep ? keep[p] : 1.0f;
+      const float xv = k * x[3 * p + ch], yv = k * y[3 * p + ch];
       b.px[p] = xv, b.py[p] = yv;
       b.pxx[p] = xv * xv, b.pyy[p] = yv * yv, b.pxy[p] = xv * yv;
     }
@@ -127,6 +139,11 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
     double channel_sum = 0;
     const float g = float(scale / count);
     for (size_t q = 0; q < n_out; ++q) {
+      const float kq = keep ? keep[(q / ow + kHalf) * size_t(w) + q % ow + kHalf] : 1.0f;
+      if (kq == 0) {
+        if (d_x) b.dmx[q] = b.dexx[q] = b.dexy[q] = 0;
+        continue;
+      }
       const float mux = b.mx[q], muy = b.my[q];
       const float sxx = b.exx[q] - mux * mux, syy = b.eyy[q] - muy * muy, sxy = b.exy[q] - mux * muy;
       const float n1 = 2 * mux * muy + kC1, n2 = 2 * sxy + kC2;
@@ -148,42 +165,70 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
     filter_valid_transposed(b.dexx.data(), w, h, b.tmp.data(), b.gxx.data());
     filter_valid_transposed(b.dexy.data(), w, h, b.tmp.data(), b.gxy.data());
 #pragma omp parallel for schedule(static)
-    for (size_t p = 0; p < n_in; ++p) d_x[3 * p + ch] += b.gmx[p] + 2 * b.px[p] * b.gxx[p] + b.py[p] * b.gxy[p];
+    for (size_t p = 0; p < n_in; ++p) {
+      const float dx = b.gmx[p] + 2 * b.px[p] * b.gxx[p] + b.py[p] * b.gxy[p];
+      d_x[3 * p + ch] += keep ? keep[p] * dx : dx;
+    }
   }
   return total / count;
 }
 
 }  // namespace
 
+namespace {
+
+void check_keep(std::span<const float> keep, size_t pixels) {
+  if (!keep.empty() && keep.size() != pixels)
+    throw std::invalid_argument("loss: the mask of kept pixels has " + std::to_string(keep.size()) +
+                                " values for " + std::to_string(pixels) + " pixels");
+}
+
+}  // namespace
+
 PhotometricLoss photometric_loss(std::span<const float> render, std::span<const float> target, int width,
-                                 int height, float ssim_lambda, std::span<float> d_render) {
+                                 int height, float ssim_lambda, std::span<float> d_render,
+                                 std::span<const float> keep) {
   check_sizes(render.size(), target.size(), width, height);
+  check_keep(keep, render.size() / 3);
   const bool grad = !d_render.empty();
   if (grad && d_render.size() != render.size()) throw std::invalid_argument("loss: gradient buffer has the wrong size");
-  const double n = double(render.size());
-  const float l1_scale = float((1.0 - ssim_lambda) / n);
+  double n = double(render.size());
+  if (!keep.empty()) {
+    n = 0;
+    for (float k : keep) n += 3 * double(k);
+  }
+  const float l1_scale = n > 0 ? float((1.0 - ssim_lambda) / n) : 0.0f;
   double l1 = 0;
   for (size_t i = 0; i < render.size(); ++i) {
-    const float diff = render[i] - target[i];
+    const float k = keep.empty() ? 1.0f : keep[i / 3];
+    const float diff = k * (render[i] - target[i]);
     l1 += std::abs(diff);
     if (grad) d_render[i] = diff > 0 ? l1_scale : (diff < 0 ? -l1_scale : 0.0f);
   }
-  l1 /= n;
+  l1 = n > 0 ? l1 / n : 0.0;
   // loss contains −λ·SSIM, so SSIM's gradient enters with scale −λ.
-  const double s = ssim_and_gradient(render, target, width, height, -ssim_lambda, grad ? d_render.data() : nullptr);
+  const double s = ssim_and_gradient(render, target, width, height, -ssim_lambda, grad ? d_render.data() : nullptr,
+                                     keep.empty() ? nullptr : keep.data());
   return {(1.0 - ssim_lambda) * l1 + ssim_lambda * (1.0 - s), l1, s};
 }
 
-double ssim(std::span<const float> a, std::span<const float> b, int width, int height) {
+double ssim(std::span<const float> a, std::span<const float> b, int width, int height, std::span<const float> keep) {
   check_sizes(a.size(), b.size(), width, height);
-  return ssim_and_gradient(a, b, width, height, 0.0f, nullptr);
+  check_keep(keep, a.size() / 3);
+  return ssim_and_gradient(a, b, width, height, 0.0f, nullptr, keep.empty() ? nullptr : keep.data());
 }
 
-double psnr(std::span<const float> a, std::span<const float> b) {
+double psnr(std::span<const float> a, std::span<const float> b, std::span<const float> keep) {
   if (a.size() != b.size() || a.empty()) throw std::invalid_argument("psnr: image sizes differ or are empty");
-  double mse = 0;
-  for (size_t i = 0; i < a.size(); ++i) mse += double(a[i] - b[i]) * (a[i] - b[i]);
-  mse /= double(a.size());
+  check_keep(keep, a.size() / 3);
+  double mse = 0, n = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    const double k = keep.empty() ? 1.0 : keep[i / 3];
+    mse += k * double(a[i] - b[i]) * (a[i] - b[i]);
+    n += k;
+  }
+  if (n == 0) return INFINITY;  // nothing kept: nothing differs
+  mse /= n;
   return mse > 0 ? -10.0 * std::log10(mse) : INFINITY;
 }
 

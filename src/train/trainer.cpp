@@ -55,17 +55,18 @@ Camera downscale_camera(const Camera& c, int factor) {
 }
 
 FloatImage downscale_image(const FloatImage& img, int factor) {
-  FloatImage out{std::max(1, img.width / factor), std::max(1, img.height / factor), 3, {}};
-  out.pixels.assign(size_t(out.width) * out.height * 3, 0.0f);
+  const int channels = img.channels;
+  FloatImage out{std::max(1, img.width / factor), std::max(1, img.height / factor), channels, {}};
+  out.pixels.assign(size_t(out.width) * out.height * channels, 0.0f);
   const float inv = 1.0f / float(factor * factor);
   for (int y = 0; y < out.height; ++y)
     for (int x = 0; x < out.width; ++x)
-      for (int c = 0; c < 3; ++c) {
+      for (int c = 0; c < channels; ++c) {
         float s = 0;
         for (int dy = 0; dy < factor; ++dy)
           for (int dx = 0; dx < factor; ++dx)
-            s += img.pixels[(size_t(y * factor + dy) * img.width + (x * factor + dx)) * 3 + c];
-        out.pixels[(size_t(y) * out.width + x) * 3 + c] = s * inv;
+            s += img.pixels[(size_t(y * factor + dy) * img.width + (x * factor + dx)) * channels + c];
+        out.pixels[(size_t(y) * out.width + x) * channels + c] = s * inv;
       }
   return out;
 }
@@ -81,6 +82,16 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
+  for (const auto* views : {&data_.train, &data_.test})
+    for (const TrainView& v : *views) {
+      if (v.keep.empty()) continue;
+      if (v.keep.size() != size_t(v.camera.width) * v.camera.height)
+        throw std::invalid_argument("view " + v.name + ": its mask has " + std::to_string(v.keep.size()) +
+                                    " values for " + std::to_string(v.camera.width) + "x" +
+                                    std::to_string(v.camera.height) + " pixels");
+      if (std::any_of(v.keep.begin(), v.keep.end(), [](float k) { return k != 0.0f && k != 1.0f; }))
+        throw std::invalid_argument("view " + v.name + ": its mask must hold only 0 (ignore) and 1 (use)");
+    }
   // SSIM (the loss, the evaluation) needs 11×11 pixels, at the coarsest level of the
   // resolution schedule too: say so before training rather than fail at its first step.
   const int coarsest = config_.downscale_at(0);
@@ -153,6 +164,42 @@ const FloatImage& Trainer::target_at(int view, int factor) {
   return cache[level];
 }
 
+std::span<const float> Trainer::keep_at(int view, int factor) {
+  const std::vector<float>& full = data_.train[view].keep;
+  if (full.empty() || factor == 1) return full;
+  int level = 0;
+  while ((2 << level) < factor) ++level;
+  if (downscaled_keep_.empty()) downscaled_keep_.resize(data_.train.size());
+  auto& cache = downscaled_keep_[view];
+  const Camera& cam = data_.train[view].camera;
+  while (static_cast<int>(cache.size()) <= level) {
+    // The mean of the covered pixels is exactly 1 only when every one of them is kept: a pixel
+    // that mixes in an ignored one (whose photo value is meaningless) is ignored too.
+    const FloatImage mean = downscale_image(FloatImage{cam.width, cam.height, 1, full}, 2 << cache.size());
+    std::vector<float> keep(mean.pixels.size());
+    for (size_t i = 0; i < keep.size(); ++i) keep[i] = mean.pixels[i] >= 1.0f - 1e-6f ? 1.0f : 0.0f;
+    cache.push_back(std::move(keep));
+  }
+  return cache[level];
+}
+
+namespace {
+
+// A Gaussian whose projected center lies on an ignored pixel does not count as seen in this
+// step for the densification statistics (its gradient from ignored pixels is zero anyway;
+// counting the view would only dilute its mean gradient).
+void hide_ignored_centers(RasterOutput& fw, std::span<const float> keep) {
+  if (keep.empty()) return;
+  for (size_t i = 0; i < fw.visible.size(); ++i) {
+    if (!fw.visible[i]) continue;
+    const float x = fw.means2d[2 * i], y = fw.means2d[2 * i + 1];
+    if (!(x >= 0 && y >= 0 && x < float(fw.width) && y < float(fw.height))) continue;
+    if (keep[size_t(y) * size_t(fw.width) + size_t(x)] == 0) fw.visible[i] = 0;
+  }
+}
+
+}  // namespace
+
 StepStats Trainer::step() {
   StepStats stats;
   stats.step = step_;
@@ -160,6 +207,7 @@ StepStats Trainer::step() {
   const int factor = config_.downscale_at(step_);
   const Camera cam = downscale_camera(data_.train[view].camera, factor);
   const FloatImage& target = target_at(view, factor);
+  const std::span<const float> keep = keep_at(view, factor);
   const size_t pixels = size_t(cam.width) * cam.height;
   const RasterSettings rs = raster_settings();
   std::array<float, 3> bg = config_.eval_background;
@@ -188,7 +236,7 @@ StepStats Trainer::step() {
     composite_layers(statics, distractor, bg, composite_);
     d_composite_.resize(3 * pixels);
     const PhotometricLoss loss =
-        photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_);
+        photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_, keep);
     static_pass_.d_color.resize(3 * pixels);
     static_pass_.d_alpha.resize(pixels);
     distractor_pass_.d_color.resize(distractors ? 3 * pixels : 0);
@@ -200,17 +248,17 @@ StepStats Trainer::step() {
     if (config_.distractors.enabled && config_.distractors.regularize)
       stats.loss += alpha_regularizers(statics, distractor, config_.distractors.lambda_static,
                                        config_.distractors.lambda_distractor, static_pass_.d_alpha,
-                                       distractor_pass_.d_alpha);
+                                       distractor_pass_.d_alpha, keep);
     if (config_.distractors.enabled) {
       const DistractorSettings& ds = config_.distractors;
       const ViewResidual residual = measure_view_residual(
           statics, distractor, composite_, target.pixels, bg, ds.explained_tolerance, ds.lambda_explained,
-          distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr);
+          distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr, keep);
       stats.loss += residual.penalty;
       view_static_unexplained[view] = float(residual.static_fraction());
       view_composite_unexplained[view] = float(residual.composite_fraction());
     }
-    stats.psnr = psnr(composite_, target.pixels);
+    stats.psnr = psnr(composite_, target.pixels, keep);
   });
 
   // 3. Backward through each layer's rasterization.
@@ -227,6 +275,7 @@ StepStats Trainer::step() {
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
   const double decay = double(lr.means) / double(config_.lr.means);
   profile.time(&StepTimings::optimizer, [&] {
+    hide_ignored_centers(static_pass_.forward, keep);
     if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
     const int sh_bands = rs.active_sh_degree + 1;
     gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands);
@@ -243,6 +292,7 @@ StepStats Trainer::step() {
   if (distractors || refine_distractors_now || (config_.distractors.enabled && view_seed_due[view])) {
     profile.time(&StepTimings::distractor, [&] {
       if (distractors) {
+        hide_ignored_centers(distractor_pass_.forward, keep);
         distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
         LearningRates dlr = config_.distractors.lr;
         dlr.means = float(dlr.means * decay);
@@ -383,7 +433,8 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
   std::vector<ViewMetrics> out;
   for (const TrainView& v : views) {
     const FloatImage img = render(v.camera, config_.eval_background);
-    out.push_back({v.name, psnr(img.pixels, v.image.pixels), ssim(img.pixels, v.image.pixels, img.width, img.height)});
+    out.push_back({v.name, psnr(img.pixels, v.image.pixels, v.keep),
+                   ssim(img.pixels, v.image.pixels, img.width, img.height, v.keep)});
   }
   return out;
 }

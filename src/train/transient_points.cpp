@@ -27,10 +27,11 @@ TransientPointAction transient_point_action_from_string(const std::string& text)
 namespace {
 
 // Mean |image − rgb| over RGB at the pixel x projects into, or a negative value when x is
-// behind the camera or projects outside the image.
+// behind the camera, projects outside the image or onto a pixel the user's mask ignores.
 float color_difference(const TrainView& view, const std::array<float, 3>& x, const std::array<uint8_t, 3>& rgb) {
   const long long pixel = view.camera.pixel_of(x);
   if (pixel < 0) return -1.0f;
+  if (!view.keep.empty() && view.keep[size_t(pixel)] == 0) return -1.0f;  // ignored by the user: no evidence
   float diff = 0;
   for (int k = 0; k < 3; ++k) diff += std::abs(view.image.pixels[3 * size_t(pixel) + k] - rgb[k] / 255.0f);
   return diff / 3.0f;

@@ -10,8 +10,9 @@ namespace desplat {
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
                                    std::span<const float> target, const std::array<float, 3>& bg, float tolerance,
                                    float lambda_explained, std::span<float> d_distractor_alpha,
-                                   std::vector<uint8_t>* mask) {
+                                   std::vector<uint8_t>* mask, std::span<const float> keep) {
   const size_t pixels = statics.alpha.size();
+  if (!keep.empty() && keep.size() != pixels) throw std::invalid_argument("measure_view_residual: mask size differs");
   if (statics.color.size() != 3 * pixels || composite.size() != 3 * pixels || target.size() != 3 * pixels)
     throw std::invalid_argument("measure_view_residual: image sizes differ");
   const bool has_distractor = !distractor.alpha.empty();
@@ -21,9 +22,14 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
   if (mask) mask->resize(pixels);  // every pixel is written below
   ViewResidual r;
   r.pixels = int64_t(pixels);
-  const float weight = penalize ? lambda_explained / float(pixels) : 0.0f;
+  if (!keep.empty()) r.pixels = std::count_if(keep.begin(), keep.end(), [](float k) { return k > 0; });
+  const float weight = penalize && r.pixels > 0 ? lambda_explained / float(r.pixels) : 0.0f;
   double penalty_sum = 0;
   for (size_t p = 0; p < pixels; ++p) {
+    if (!keep.empty() && keep[p] == 0) {  // ignored by the user: neither explained nor not
+      if (mask) (*mask)[p] = 0;
+      continue;
+    }
     float static_err = 0, composite_err = 0;
     const float transmittance = 1.0f - statics.alpha[p];
     for (int c = 0; c < 3; ++c) {
@@ -42,7 +48,7 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
       d_distractor_alpha[p] += weight;
     }
   }
-  r.penalty = penalize ? double(lambda_explained) * penalty_sum / double(pixels) : 0.0;
+  r.penalty = penalize && r.pixels > 0 ? double(lambda_explained) * penalty_sum / double(r.pixels) : 0.0;
   return r;
 }
 

@@ -10,6 +10,13 @@
 //   photo in images/ (its COLMAP camera's size), also when training reads images_N/.
 //   load_colmap_scene fills SceneView::mask_path for the views that have such a file.
 //
+// User masks (nerfstudio's convention, also COLMAP's file naming): pixels to leave out of
+// training and evaluation, e.g. the photographer's shadow or a car the user already knows is
+// there. One PNG per photo, in <data_dir>/masks/ (or SceneOptions::masks_dir), named
+// <image name>.png (COLMAP: 0002.jpg.png) or <image name with its extension replaced by .png>
+// (nerfstudio: 0002.png), the first tried first. The photo's size; the first channel is used;
+// black (≤ 0.5) = ignore, white = use. A view without a file uses every pixel.
+//
 // Frames and units: masks are row-major [H, W] in the image's pixel grid (pixel (i, j) has its
 // center at (i + 0.5, j + 0.5)).
 //
@@ -20,6 +27,7 @@
 #include <filesystem>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "desplat/io/image_io.hpp"
 #include "desplat/io/scene.hpp"
@@ -36,6 +44,13 @@ std::filesystem::path distractor_mask_path(const std::filesystem::path& data_dir
 // Not cached: masks are read once per view. Throws SceneError naming the file when the view
 // has no mask (mask_path empty), the file is unreadable, or its size is not the photo's.
 FloatImage load_view_mask(const Scene& scene, size_t view);
+
+// The user's mask of views[view] as [H·W] at the training size, 1 = use, 0 = ignore, through
+// the geometry of load_view_image. A training pixel is used only when every photo pixel that
+// contributes to it (resizing, bilinear undistortion) is: a pixel that mixes in an ignored one
+// is ignored too. Throws SceneError naming the file when the view has no user mask
+// (user_mask_path empty), the file is unreadable, or its size is not the photo's.
+std::vector<float> load_view_keep_mask(const Scene& scene, size_t view);
 
 struct MaskScore {
   double iou = 1;                 // |P ∩ T| / |P ∪ T|; 1 when both are empty

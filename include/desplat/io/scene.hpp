@@ -8,6 +8,10 @@
 //   <data_dir>/distractor_masks/<name with its extension replaced by .png>
 //                                  optional ground-truth distractor masks (masks.hpp); a view
 //                                  without such a file (or a scene without the folder) has none
+//   <data_dir>/masks/<name>.png or <name with its extension replaced by .png>
+//                                  optional user masks of pixels to ignore (masks.hpp,
+//                                  nerfstudio's convention: black = ignore); another folder
+//                                  with SceneOptions::masks_dir
 // The input is only read, never written (it may be on a read-only volume).
 //
 // Frames and units:
@@ -75,6 +79,9 @@ struct SceneOptions {
   SplitOptions split;                 // default: every 8th image (by name) is a test view
   UndistortOptions undistort;         // default: COLMAP image_undistorter's defaults
   WarningSink on_warning;             // empty: "desplat: warning: …" on stderr
+  // The user's masks (masks.hpp). Empty: <data_dir>/masks when that folder exists, else none.
+  // Given: the folder must exist (SceneError otherwise).
+  std::filesystem::path masks_dir;
 };
 
 struct SceneView {
@@ -88,10 +95,12 @@ struct SceneView {
   int source_width = 0, source_height = 0;  // size of the pixels in image_path
   int photo_width = 0, photo_height = 0;    // the COLMAP camera's size: the photo in images/
   std::filesystem::path mask_path;     // ground-truth distractor mask; empty when there is none
+  std::filesystem::path user_mask_path;  // the user's mask of pixels to ignore; empty when none
 };
 
 struct Scene {
   std::filesystem::path data_dir;      // absolute
+  std::filesystem::path masks_dir;     // absolute: the user's masks folder in use; empty when none
   std::vector<SceneView> views;        // Train and Test views sorted by name; Unused ones left out
   std::vector<std::array<float, 3>> points_xyz;    // [P] normalized frame
   std::vector<std::array<uint8_t, 3>> points_rgb;  // [P] 0..255

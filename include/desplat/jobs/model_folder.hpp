@@ -34,6 +34,7 @@ struct SceneRecipe {
   int downscale = 1;
   SplitOptions split;                          // as given to training (list and .tsv paths absolute)
   std::vector<std::string> train_views, test_views;  // the split's outcome, in scene order
+  std::filesystem::path masks_dir;             // absolute: the user's masks in use; empty: none
 
   // The recipe of a loaded scene: its options plus the views the split gave.
   static SceneRecipe of(const Scene& scene, const std::filesystem::path& data_dir, const SceneOptions& options);

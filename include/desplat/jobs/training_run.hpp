@@ -48,6 +48,7 @@ struct TrainingRunOptions {
   bool overwrite = false;
   int downscale = 1;
   SplitOptions split;
+  std::filesystem::path masks_dir;  // the user's masks (masks.hpp); empty: <data>/masks if present
   int eval_every = 0;        // 0: only at the end
   int checkpoint_every = 1000;
   int log_every = 100;       // plain-log interval when stdout is not a terminal

@@ -48,9 +48,11 @@ void composite_layers_backward(Layer statics, Layer distractor, const std::array
 // λ_s·mean(1 − A_s) + λ_d·mean(A_d) (docs/METHOD.md §4): pushes the static layer to be
 // opaque and the distractor layer to be transparent unless the photometric loss needs
 // it. Returns the value and ADDS its gradient to d_static_alpha / d_distractor_alpha
-// (the distractor ones are skipped when empty).
+// (the distractor ones are skipped when empty). With `keep` ([P], 0 or 1, the user's mask)
+// the means run over kept pixels and ignored ones get no gradient.
 double alpha_regularizers(Layer statics, Layer distractor, float lambda_static, float lambda_distractor,
-                          std::span<float> d_static_alpha, std::span<float> d_distractor_alpha);
+                          std::span<float> d_static_alpha, std::span<float> d_distractor_alpha,
+                          std::span<const float> keep = {});
 
 // The image a viewer sees of a single render: C + (1 − A)·background, clamped.
 FloatImage composite_over_background(const RasterOutput& render, const std::array<float, 3>& background);

@@ -32,6 +32,11 @@ struct TrainView {
   std::string name;
   Camera camera;      // undistorted pinhole, normalized frame, full training resolution
   FloatImage image;   // [H, W, 3] matching the camera
+  // Optional [H·W], the user's mask (docs/METHOD.md §4, masks): 1 = use the pixel, 0 = ignore
+  // it; empty = use every pixel. An ignored pixel leaves the loss, SSIM, the regularizers, the
+  // residual statistics, the densification statistics and the metrics; its image value is
+  // never read for training (the loader sets it to 0).
+  std::vector<float> keep;
 };
 
 struct TrainingData {
@@ -201,6 +206,8 @@ class Trainer {
   int64_t step_ = 0;
   // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
   std::vector<std::vector<FloatImage>> downscaled_;
+  // Per view with a mask: the mask at factor 2, 4, … (a pixel is kept when all it covers is).
+  std::vector<std::vector<std::vector<float>>> downscaled_keep_;
   // Scratch reused every step.
   LayerPass static_pass_, distractor_pass_;
   std::vector<float> composite_, d_composite_;
@@ -208,6 +215,7 @@ class Trainer {
 
   int next_view();
   const FloatImage& target_at(int view, int factor);
+  std::span<const float> keep_at(int view, int factor);  // empty when the view has no mask
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
@@ -228,7 +236,7 @@ class Trainer {
 // resolution, not a transient object (docs/METHOD.md §7, growth control).
 bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period);
 
-// Camera and image at 1/factor resolution (block average, sizes rounded down).
+// Camera and image at 1/factor resolution (block average of every channel, sizes rounded down).
 Camera downscale_camera(const Camera& c, int factor);
 FloatImage downscale_image(const FloatImage& img, int factor);
 

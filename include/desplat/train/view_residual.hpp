@@ -26,11 +26,13 @@ struct ViewResidual {
 // With lambda_explained > 0 and a distractor layer, ADDS the penalty's gradient
 // λ_e/P · [explained] to d_distractor_alpha [P]. `uncovered_mask`, when not null, is
 // resized to [P] and set to 1 where neither the static layer nor the composite explains the
-// pixel: what no Gaussian of either layer accounts for yet.
+// pixel: what no Gaussian of either layer accounts for yet. `keep` ([P], 0 or 1, optional):
+// the user's mask; an ignored pixel is in no count (`pixels` counts the kept ones), gets no
+// penalty and is never uncovered.
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
                                    std::span<const float> target, const std::array<float, 3>& background,
                                    float tolerance, float lambda_explained, std::span<float> d_distractor_alpha,
-                                   std::vector<uint8_t>* uncovered_mask = nullptr);
+                                   std::vector<uint8_t>* uncovered_mask = nullptr, std::span<const float> keep = {});
 
 // Keeps a set pixel of `mask` [height·width] only when its 8 neighbours inside the image
 // are set too (a 3×3 erosion): a transient object covers a connected area, while isolated
