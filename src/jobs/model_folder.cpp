@@ -180,7 +180,7 @@ json ModelFolder::read_metrics() const { return read_json_file(metrics_path(), "
 
 std::vector<std::filesystem::path> ModelFolder::existing_training_outputs() const {
   std::vector<std::filesystem::path> found;
-  for (const char* name : {"config.json", "checkpoint.ckpt", "metrics.json", "point_cloud.ply", "renders"})
+  for (const char* name : {"config.json", "checkpoint.ckpt", "metrics.json", "point_cloud.ply", "renders", "report.html"})
     if (std::filesystem::exists(dir_ / name)) found.push_back(dir_ / name);
   return found;
 }

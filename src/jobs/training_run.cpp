@@ -3,6 +3,7 @@
 
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/jobs/model_folder.hpp"
+#include "desplat/jobs/report.hpp"
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -453,7 +454,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (!masks.views.empty())
     std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
                 masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
-  std::printf("outputs in %s: metrics.json, renders/test/%s, point_cloud.ply, checkpoint.ckpt\n",
+  const ReportResult report = write_report(opt.out_dir);
+  if (!report.note.empty()) std::printf("report: %s\n", report.note.c_str());
+  std::printf("outputs in %s: report.html (open it in a browser), metrics.json, renders/test/%s, point_cloud.ply, "
+              "checkpoint.ckpt\n",
               fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
   return 0;
 }

@@ -71,7 +71,7 @@ class ModelFolder {
   void write_checkpoint(const Trainer& trainer, const nlohmann::json& extra_metadata) const;  // atomically
   Checkpoint read_checkpoint() const;
   // The outputs of a training run (config.json, checkpoint.ckpt, metrics.json,
-  // point_cloud.ply, renders/) that exist in the folder: a fresh run refuses a folder that
+  // point_cloud.ply, renders/, report.html) that exist in the folder: a fresh run refuses a folder that
   // holds any of them unless told to replace them (remove_training_outputs removes exactly
   // these; other files are left alone).
   std::vector<std::filesystem::path> existing_training_outputs() const;

@@ -1,0 +1,373 @@
+// report.html from a model folder's files (see include/desplat/jobs/report.hpp).
+#include "desplat/jobs/report.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "desplat/io/atomic_file.hpp"
+#include "desplat/jobs/model_folder.hpp"
+#include "desplat/sfm/subprocess.hpp"
+
+namespace desplat {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+std::string read_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument("cannot read " + path.string());
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::string base64(const std::string& bytes) {
+  static const char* const k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    const uint32_t b0 = uint8_t(bytes[i]), b1 = i + 1 < bytes.size() ? uint8_t(bytes[i + 1]) : 0,
+                   b2 = i + 2 < bytes.size() ? uint8_t(bytes[i + 2]) : 0;
+    const uint32_t v = b0 << 16 | b1 << 8 | b2;
+    out += k[v >> 18 & 63];
+    out += k[v >> 12 & 63];
+    out += i + 1 < bytes.size() ? k[v >> 6 & 63] : '=';
+    out += i + 2 < bytes.size() ? k[v & 63] : '=';
+  }
+  return out;
+}
+
+std::string escape_html(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&#39;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string fixed(double v, int digits) {
+  if (!std::isfinite(v)) return v > 0 ? "inf" : "n/a";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+double number(const json& j, const char* key, double fallback = NAN) {
+  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : fallback;
+}
+
+std::string duration(double s) {
+  if (!std::isfinite(s)) return "n/a";
+  const long t = std::lround(s);
+  char buf[48];
+  if (t >= 3600) std::snprintf(buf, sizeof buf, "%ld h %02ld min", t / 3600, t / 60 % 60);
+  else if (t >= 60) std::snprintf(buf, sizeof buf, "%ld min %02ld s", t / 60, t % 60);
+  else std::snprintf(buf, sizeof buf, "%.1f s", s);
+  return buf;
+}
+
+std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      const size_t colon = line.find(':');
+      if (colon != std::string::npos) return line.substr(colon + 2);
+    }
+  return "unknown CPU";
+}
+
+// ---- Plots through gnuplot -------------------------------------------------------------------
+
+struct Series {
+  std::string title;
+  std::vector<std::pair<double, double>> points;
+};
+
+struct Plot {
+  std::string title, xlabel, ylabel;
+  std::vector<Series> series;
+  bool histogram = false;  // one bar per point of the first series, labelled by `bar_labels`
+  std::vector<std::string> bar_labels;
+};
+
+// gnuplot's script: the data inline as datablocks, SVG with its mouse script embedded.
+std::string gnuplot_script(const Plot& p, const fs::path& svg) {
+  std::ostringstream s;
+  s << "set terminal svg size 620,340 dynamic mouse standalone enhanced font 'sans,11'\n"
+    << "set output '" << svg.string() << "'\n"
+    << "set title '" << p.title << "'\nset xlabel '" << p.xlabel << "'\nset ylabel '" << p.ylabel << "'\n"
+    << "set grid\nset key box opaque bottom right\n";
+  for (size_t k = 0; k < p.series.size(); ++k) {
+    s << "$D" << k << " << EOD\n";
+    for (size_t i = 0; i < p.series[k].points.size(); ++i) {
+      const auto& [x, y] = p.series[k].points[i];
+      if (p.histogram) s << '"' << p.bar_labels[i] << "\" " << y << "\n";
+      else s << x << ' ' << y << "\n";
+    }
+    s << "EOD\n";
+  }
+  if (p.histogram) {
+    s << "set style fill solid 0.7\nset boxwidth 0.6\nset yrange [0:*]\nunset key\n"
+      << "plot $D0 using 0:2:xtic(1) with boxes title '" << p.series[0].title << "'\n";
+    return s.str();
+  }
+  s << "plot ";
+  for (size_t k = 0; k < p.series.size(); ++k)
+    s << (k ? ", " : "") << "$D" << k << " using 1:2 with "
+      << (p.series[k].points.size() < 12 ? "linespoints pt 7" : "lines") << " lw 2 title '" << p.series[k].title
+      << "'";
+  s << "\n";
+  return s.str();
+}
+
+class Plotter {
+ public:
+  explicit Plotter(fs::path tmp) : tmp_(std::move(tmp)) {
+    gnuplot_ = find_executable("gnuplot");
+    if (!gnuplot_) note_ = "gnuplot is not installed (scripts/install_deps.sh installs it): no plots";
+  }
+  ~Plotter() {
+    std::error_code ec;
+    fs::remove_all(tmp_, ec);
+  }
+
+  // The SVG's text, or "" (with note() saying why) when it could not be drawn.
+  std::string svg(const Plot& p) {
+    if (!gnuplot_) return "";
+    const bool empty = std::all_of(p.series.begin(), p.series.end(), [](const Series& s) { return s.points.empty(); });
+    if (empty) return "";
+    std::error_code ec;
+    fs::create_directories(tmp_, ec);
+    const fs::path script = tmp_ / "plot.gp", out = tmp_ / "plot.svg";
+    fs::remove(out, ec);
+    write_file_atomically(script, gnuplot_script(p, out));
+    std::string output;
+    const ProcessExit e = run_subprocess({gnuplot_->string(), script.string()},
+                                         [&](std::string_view chunk) { output += chunk; }, 60);
+    if (!e.ok() || !fs::exists(out)) {
+      note_ = "gnuplot failed on '" + p.title + "': " + output;
+      return "";
+    }
+    ++drawn_;
+    return read_bytes(out);
+  }
+  int drawn() const { return drawn_; }
+  const std::string& note() const { return note_; }
+
+ private:
+  fs::path tmp_;
+  std::optional<fs::path> gnuplot_;
+  std::string note_;
+  int drawn_ = 0;
+};
+
+// An SVG in an iframe of its own (gnuplot's scripts use fixed element ids).
+std::string plot_frame(const std::string& svg, const std::string& title) {
+  if (svg.empty()) return "";
+  std::string body = svg;
+  if (body.rfind("<?xml", 0) == 0) body = body.substr(body.find("?>") + 2);
+  return "<iframe class=\"plot\" title=\"" + escape_html(title) +
+         "\" srcdoc=\"" + escape_html("<!DOCTYPE html><html><body style='margin:0'>" + body + "</body></html>") +
+         "\"></iframe>\n";
+}
+
+// ---- Sections ----------------------------------------------------------------------------------
+
+std::string png_img(const fs::path& file, const std::string& alt) {
+  return "<img alt=\"" + escape_html(alt) + "\" src=\"data:image/png;base64," + base64(read_bytes(file)) + "\">";
+}
+
+std::string row(const std::string& key, const std::string& value) {
+  return "<tr><th>" + escape_html(key) + "</th><td>" + escape_html(value) + "</td></tr>\n";
+}
+
+std::string summary(const json& m, const json& c) {
+  const json scene = c.value("scene", json::object());
+  const json cost = m.value("cost", json::object());
+  const bool desplat = m.value("mode", "") == "desplat";
+  std::string s = "<h2>Summary</h2>\n<table>\n";
+  s += row("scene", scene.value("data_dir", std::string("?")) + " (downscale " +
+                        std::to_string(scene.value("downscale", 1)) + ", " +
+                        std::to_string(scene.value("train_views", json::array()).size()) + " training and " +
+                        std::to_string(scene.value("test_views", json::array()).size()) + " test views" +
+                        (scene.contains("masks_dir") ? ", masks from " + scene["masks_dir"].get<std::string>() : "") +
+                        ")");
+  s += row("effects modelled",
+           desplat ? "static scene + per-view distractors (DeSplat); appearance and background are not modelled"
+                   : "static scene only (the Splatfacto baseline, --static-only)");
+  s += row("test PSNR / SSIM", m["mean_psnr"].is_number()
+                                   ? fixed(m["mean_psnr"].get<double>(), 2) + " dB / " + fixed(number(m, "mean_ssim"), 4)
+                                   : "no test views");
+  s += row("Gaussians", std::to_string(m.value("gaussians", 0)) + " static + " +
+                            std::to_string(cost.value("distractor_gaussians", 0)) + " distractor");
+  s += row("steps", std::to_string(m.value("step", 0)));
+  s += row("training time (this run)", duration(number(m, "wall_seconds_this_run")));
+  s += row("peak memory", fixed(number(m, "peak_memory_mb"), 0) + " MB");
+  s += row("machine", cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads");
+  const json& masks = m.contains("distractor_masks") ? m["distractor_masks"] : json();
+  if (masks.is_object())
+    s += row("distractor masks", "mean IoU " + fixed(number(masks, "mean_iou"), 3) + " over " +
+                                     std::to_string(masks.value("occluded_views", 0)) + " occluded training views");
+  return s + "</table>\n";
+}
+
+std::string test_views(const json& m, const fs::path& dir) {
+  std::string s = "<h2>Test views: ground truth | render</h2>\n";
+  if (!m.contains("views") || m["views"].empty()) return s + "<p>No test views (the split left none).</p>\n";
+  for (const json& v : m["views"]) {
+    const std::string name = v.value("name", "");
+    const fs::path file = dir / "renders" / "test" / fs::path(name).replace_extension(".png");
+    s += "<figure>" + (fs::exists(file) ? png_img(file, name) : "<p>(no render)</p>") + "<figcaption>" +
+         escape_html(name) + ": PSNR " + fixed(number(v, "psnr"), 2) + " dB, SSIM " + fixed(number(v, "ssim"), 4) +
+         "</figcaption></figure>\n";
+  }
+  return s;
+}
+
+std::string decomposition(const json& m, const fs::path& dir) {
+  const fs::path folder = dir / "renders" / "train";
+  if (!fs::is_directory(folder)) return "";
+  std::map<std::string, double> iou;
+  if (m.contains("distractor_masks") && m["distractor_masks"].is_object())
+    for (const json& v : m["distractor_masks"]["views"])
+      iou[fs::path(v.value("name", "")).replace_extension(".png").string()] = number(v, "iou");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(folder))
+    if (e.path().extension() == ".png") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  std::string s = "<h2>Training views: truth | static | distractor | composite | distractor mask</h2>\n";
+  for (const fs::path& f : files) {
+    const auto it = iou.find(f.filename().string());
+    s += "<figure>" + png_img(f, f.filename().string()) + "<figcaption>" + escape_html(f.filename().string()) +
+         (it != iou.end() ? ": mask IoU " + fixed(it->second, 3) : "") + "</figcaption></figure>\n";
+  }
+  return s;
+}
+
+std::string curves(const json& m, Plotter& plotter) {
+  Series loss{"training loss", {}}, train_psnr{"training PSNR (composite)", {}}, test_psnr{"test PSNR", {}};
+  Series statics{"static", {}}, distractors{"distractor", {}}, psnr_time{"training PSNR", {}},
+      test_time{"test PSNR", {}}, count_time{"static Gaussians", {}};
+  for (const json& h : m.value("history", json::array())) {
+    const double step = number(h, "step"), t = number(h, "wall_seconds");
+    const std::string kind = h.value("kind", "");
+    if (kind == "training") {
+      loss.points.push_back({step, number(h, "loss")});
+      train_psnr.points.push_back({step, number(h, "psnr")});
+      statics.points.push_back({step, number(h, "gaussians")});
+      distractors.points.push_back({step, number(h, "distractor_gaussians")});
+      psnr_time.points.push_back({t, number(h, "psnr")});
+      count_time.points.push_back({t, number(h, "gaussians")});
+    } else if (kind == "evaluation") {
+      test_psnr.points.push_back({step, number(h, "mean_psnr")});
+      test_time.points.push_back({t, number(h, "mean_psnr")});
+    }
+  }
+  if (m["mean_psnr"].is_number() && !loss.points.empty()) {  // the final evaluation
+    test_psnr.points.push_back({double(m.value("step", 0)), m["mean_psnr"].get<double>()});
+    test_time.points.push_back({number(m, "wall_seconds_this_run"), m["mean_psnr"].get<double>()});
+  }
+  std::vector<Series> psnr_series{train_psnr}, time_series{psnr_time};
+  if (!test_psnr.points.empty()) psnr_series.push_back(test_psnr), time_series.push_back(test_time);
+  std::vector<Series> count_series{statics};
+  if (m.value("mode", "") == "desplat") count_series.push_back(distractors);
+  std::string s = "<h2>Curves</h2>\n";
+  s += plot_frame(plotter.svg({"loss against step", "step", "loss", {loss}, false, {}}), "loss");
+  s += plot_frame(plotter.svg({"PSNR against step", "step", "PSNR [dB]", psnr_series, false, {}}), "psnr");
+  s += plot_frame(plotter.svg({"Gaussians against step", "step", "Gaussians", count_series, false, {}}), "gaussians");
+  s += plot_frame(plotter.svg({"PSNR against wall time", "wall time [s]", "PSNR [dB]", time_series, false, {}}),
+                  "psnr-time");
+  s += plot_frame(plotter.svg({"static Gaussians against wall time", "wall time [s]", "Gaussians", {count_time}, false, {}}),
+                  "gaussians-time");
+  return s;
+}
+
+std::string step_breakdown(const json& m, Plotter& plotter) {
+  const json t = m.value("median_step_seconds_full_resolution", json::object());
+  if (!t.is_object() || t.value("steps_measured", 0) == 0)
+    return "<h2>Time of a step</h2>\n<p>No step ran at full resolution (the resolution schedule had not reached "
+           "it), so there is no breakdown.</p>\n";
+  Series ms{"median milliseconds", {}};
+  std::vector<std::string> labels;
+  std::string table = "<table>\n";
+  for (const char* part : {"forward", "backward", "loss", "optimizer_and_density", "distractor_branch"}) {
+    const double v = 1000 * number(t, part, 0);
+    ms.points.push_back({double(labels.size()), v});
+    labels.push_back(part);
+    table += row(part, fixed(v, 1) + " ms");
+  }
+  table += row("total", fixed(1000 * number(t, "total", 0), 1) + " ms (median over " +
+                            std::to_string(t.value("steps_measured", 0)) + " full-resolution steps)");
+  Plot p{"median full-resolution step", "", "ms", {ms}, true, labels};
+  return "<h2>Time of a step</h2>\n" + plot_frame(plotter.svg(p), "step-time") + table + "</table>\n";
+}
+
+const char* kStyle = R"(<style>
+body { font-family: sans-serif; margin: 2em; color: #222; max-width: 1400px; }
+table { border-collapse: collapse; margin-bottom: 1em; }
+th, td { text-align: left; padding: 0.2em 1em 0.2em 0; border-bottom: 1px solid #ddd; }
+figure { display: inline-block; margin: 0.5em; vertical-align: top; }
+figure img { max-width: 100%; image-rendering: pixelated; min-width: 256px; }
+iframe.plot { width: 640px; height: 360px; border: none; }
+pre { background: #f6f6f6; padding: 1em; overflow-x: auto; }
+.note { color: #a40; }
+</style>)";
+
+// Counts broken images and drawn plots once the page has loaded (for people: nothing; for the
+// headless-browser test: data attributes on <body>).
+const char* kSelfCheck = R"(<script>
+window.addEventListener('load', function () {
+  var imgs = document.querySelectorAll('img'), broken = 0;
+  imgs.forEach(function (i) { if (!i.complete || i.naturalWidth === 0) broken++; });
+  var frames = document.querySelectorAll('iframe.plot'), drawn = 0;
+  frames.forEach(function (f) { var d = f.contentDocument; if (d && d.querySelector('svg path')) drawn++; });
+  document.body.setAttribute('data-images', imgs.length);
+  document.body.setAttribute('data-broken-images', broken);
+  document.body.setAttribute('data-plots', drawn);
+});
+</script>)";
+
+}  // namespace
+
+ReportResult write_report(const fs::path& model_dir) {
+  const ModelFolder model(model_dir);
+  json metrics, config;
+  for (auto [path, target] : {std::pair{model.metrics_path(), &metrics}, std::pair{model.config_path(), &config}}) {
+    try {
+      *target = json::parse(read_bytes(path));
+    } catch (const json::exception& e) {
+      throw std::invalid_argument(path.string() + " is not valid JSON: " + e.what());
+    }
+  }
+  Plotter plotter(model_dir / ".report_tmp");
+  std::string html = "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>desplat report: " +
+                     escape_html(fs::absolute(model_dir).filename().string()) + "</title>" + kStyle + kSelfCheck +
+                     "</head><body>\n<h1>desplat training report</h1>\n";
+  std::string body = summary(metrics, config) + curves(metrics, plotter) + step_breakdown(metrics, plotter) +
+                     test_views(metrics, model_dir) + decomposition(metrics, model_dir);
+  if (!plotter.note().empty()) html += "<p class=\"note\">" + escape_html(plotter.note()) + "</p>\n";
+  html += body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";
+  ReportResult r{model_dir / "report.html", plotter.drawn(), plotter.note()};
+  write_file_atomically(r.path, html);
+  return r;
+}
+
+}  // namespace desplat
