@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "desplat/jobs/bench_run.hpp"
+#include "desplat/jobs/report.hpp"
 #include "stop_signal.hpp"
 
 int main(int argc, char** argv) {
@@ -41,6 +42,9 @@ int main(int argc, char** argv) {
       });
     }
     for (const auto& file : desplat::write_bench_plots(out_dir, points)) std::printf("wrote %s\n", file.c_str());
+    const desplat::ReportResult page = desplat::write_bench_report(out_dir, points);
+    std::printf("wrote %s (open it in a browser)%s%s\n", page.path.c_str(), page.note.empty() ? "" : ": ",
+                page.note.c_str());
     std::printf("wrote %s\n", (out_dir / "bench.csv").c_str());
     if (stop.load()) {
       std::printf("interrupted; continue with --resume\n");

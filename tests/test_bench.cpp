@@ -5,7 +5,11 @@
 #include <fstream>
 
 #include "desplat/jobs/bench_run.hpp"
-#include "desplat/eval/line_plot.hpp"
+#include "desplat/jobs/report.hpp"
+#include "support/expect.hpp"
+#include "desplat/eval/plot.hpp"
+#include "desplat/io/atomic_file.hpp"
+#include "desplat/io/image_io.hpp"
 #include "desplat/synth/synth.hpp"
 
 namespace desplat {
@@ -19,58 +23,60 @@ fs::path temp_dir(const std::string& name) {
   return p;
 }
 
-std::array<float, 3> pixel(const FloatImage& im, double x, double y) {
-  const size_t i = (size_t(std::lround(y)) * im.width + size_t(std::lround(x))) * 3;
-  return {im.pixels[i], im.pixels[i + 1], im.pixels[i + 2]};
+// gnuplot's SVG records the axis ranges it chose for its mouse script.
+double svg_axis(const std::string& svg, const std::string& name) {
+  const std::string key = "gnuplot_svg.plot_axis_" + name + " = ";
+  const size_t at = svg.find(key);
+  if (at == std::string::npos) return NAN;
+  return std::stod(svg.substr(at + key.size()));
 }
 
-bool near(const std::array<float, 3>& a, const std::array<float, 3>& b) {
-  return std::abs(a[0] - b[0]) < 0.02f && std::abs(a[1] - b[1]) < 0.02f && std::abs(a[2] - b[2]) < 0.02f;
+TEST(Plot, SvgHasTheTitlesLegendAndAxesThatHoldTheData) {
+  if (!plotting_available()) FAIL() << "gnuplot is not installed: run scripts/install_deps.sh";
+  const fs::path dir = temp_dir("plot_svg");
+  const std::vector<PlotSeries> series = {{"flat", {0, 5, 10}, {2, 2, 2}}, {"rising's", {0, 10}, {1, 3}}};
+  const std::string svg = draw_plot(line_plot("PSNR vs time", "seconds", "dB"), series, PlotFormat::Svg, dir);
+  for (const char* text : {"PSNR vs time", "seconds", ">dB<", ">flat<", ">rising's<", "<svg"})
+    EXPECT_NE(svg.find(text), std::string::npos) << text;
+  // The axes hold the data ([0, 10] × [1, 3]) and no more than a tick step beyond it.
+  EXPECT_LE(svg_axis(svg, "xmin"), 0);
+  EXPECT_GE(svg_axis(svg, "xmax"), 10);
+  EXPECT_LE(svg_axis(svg, "ymin"), 1);
+  EXPECT_GE(svg_axis(svg, "ymax"), 3);
+  EXPECT_GT(svg_axis(svg, "ymin"), 0);
+  EXPECT_LT(svg_axis(svg, "ymax"), 4);
+  EXPECT_TRUE(fs::is_empty(dir));  // gnuplot's script and output are removed
 }
 
-TEST(LinePlot, CurvesLandWhereTheirDataSays) {
-  const std::vector<PlotSeries> series = {{"flat", {0, 5, 10}, {2, 2, 2}}, {"rising", {0, 10}, {1, 3}}};
-  const PlotSpec spec{"t", "x", "y"};
-  const PlotFrame f = plot_frame(spec, series);
-  // Data range [0, 10] × [1, 3] plus 5 % margins.
-  EXPECT_DOUBLE_EQ(f.x_min, -0.5);
-  EXPECT_DOUBLE_EQ(f.x_max, 10.5);
-  EXPECT_DOUBLE_EQ(f.y_min, 0.9);
-  EXPECT_DOUBLE_EQ(f.y_max, 3.1);
-  const FloatImage im = draw_line_plot(spec, series);
-  ASSERT_EQ(im.width, spec.width);
-  // On the flat line, between its markers, and on the rising line at x = 2.5 (y = 1.5).
-  EXPECT_TRUE(near(pixel(im, f.pixel_x(2.5), f.pixel_y(2)), plot_color(0)));
-  EXPECT_TRUE(near(pixel(im, f.pixel_x(2.5), f.pixel_y(1.5)), plot_color(1)));
-  // Well off both lines the plot is background (white or a light grid line).
-  const auto off = pixel(im, f.pixel_x(7.3), f.pixel_y(1.2));
-  EXPECT_GT(off[0], 0.85f);
-  EXPECT_GT(off[2], 0.85f);
+TEST(Plot, PngIsAnImageOfTheAskedSizeWithTheSeriesColours) {
+  if (!plotting_available()) FAIL() << "gnuplot is not installed: run scripts/install_deps.sh";
+  const fs::path dir = temp_dir("plot_png");
+  const std::vector<PlotSeries> series = {{"a", {0, 1, 2}, {0, 1, 4}}, {"b", {0, 2}, {4, 0}}};
+  PlotSpec spec = line_plot("t", "x", "y");
+  spec.width = 640, spec.height = 400;
+  const std::string png = draw_plot(spec, series, PlotFormat::Png, dir);
+  write_file_atomically(dir / "p.png", png);
+  const FloatImage im = read_image_rgb(dir / "p.png");
+  ASSERT_EQ(im.width, 640);
+  ASSERT_EQ(im.height, 400);
+  // gnuplot's first two line colours, #9400d3 and #009e73, are drawn.
+  int first = 0, second = 0;
+  for (size_t p = 0; p < im.pixels.size(); p += 3) {
+    const float r = im.pixels[p], g = im.pixels[p + 1], b = im.pixels[p + 2];
+    first += std::abs(r - 0x94 / 255.f) < 0.05f && g < 0.05f && std::abs(b - 0xd3 / 255.f) < 0.05f;
+    second += r < 0.05f && std::abs(g - 0x9e / 255.f) < 0.05f && std::abs(b - 0x73 / 255.f) < 0.05f;
+  }
+  EXPECT_GT(first, 100);
+  EXPECT_GT(second, 100);
 }
 
-TEST(LinePlot, TicksAreRoundNumbersInsideTheAxis) {
-  const std::vector<double> seconds = nice_ticks(-14.75, 661.6);  // the time axis of a bench plot
-  EXPECT_EQ(seconds, (std::vector<double>{0, 100, 200, 300, 400, 500, 600}));
-  const std::vector<double> psnr = nice_ticks(20.85, 27.8);
-  EXPECT_EQ(psnr, (std::vector<double>{21, 22, 23, 24, 25, 26, 27}));
-  const std::vector<double> iou = nice_ticks(-0.041, 0.867);
-  ASSERT_EQ(iou.size(), 5u);  // 0, 0.2, …, 0.8
-  for (size_t i = 0; i < iou.size(); ++i) EXPECT_NEAR(iou[i], 0.2 * double(i), 1e-12);
-  const std::vector<double> narrow = nice_ticks(0.9, 3.1);  // step 0.5: 1, 1.5, …, 3 (0.2 would give 11)
-  ASSERT_EQ(narrow.size(), 5u);
-  EXPECT_DOUBLE_EQ(narrow.front(), 1.0);
-  EXPECT_DOUBLE_EQ(narrow.back(), 3.0);
-  EXPECT_TRUE(nice_ticks(1, 1).empty());
-  EXPECT_TRUE(nice_ticks(0, NAN).empty());
-}
-
-TEST(LinePlot, BadSeriesAreErrors) {
-  EXPECT_THROW(draw_line_plot({}, {{"a", {1, 2}, {1}}}), std::invalid_argument);
-  EXPECT_THROW(draw_line_plot({}, {{"a", {NAN}, {1}}}), std::invalid_argument);
-  // One point still gets a frame around it.
-  const PlotFrame f = plot_frame({}, {{"a", {3}, {4}}});
-  EXPECT_LT(f.x_min, 3);
-  EXPECT_GT(f.y_max, 4);
+TEST(Plot, BadSeriesAreErrors) {
+  const fs::path dir = temp_dir("plot_bad");
+  EXPECT_THROW(draw_plot(line_plot("t", "x", "y"), {{"a", {1, 2}, {1}}}, PlotFormat::Svg, dir), std::invalid_argument);
+  EXPECT_THROW(draw_plot(line_plot("t", "x", "y"), {{"a", {NAN}, {1}}}, PlotFormat::Svg, dir), std::invalid_argument);
+  PlotSpec bars = line_plot("t", "", "ms");
+  bars.bars = true;  // without labels
+  EXPECT_THROW(draw_plot(bars, {{"a", {0, 1}, {1, 2}}}, PlotFormat::Svg, dir), std::invalid_argument);
 }
 
 TEST(BenchCsv, RoundTripsAndNamesTheBadLine) {
@@ -179,6 +185,16 @@ TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {
   const std::vector<fs::path> plots = write_bench_plots(dir / "out", points);
   EXPECT_EQ(plots.size(), 3u);  // PSNR, SSIM, IoU against time; one scene, so no clutter plot
   for (const fs::path& p : plots) EXPECT_TRUE(fs::exists(p)) << p;
+  // The page: PSNR and IoU against time for the one scene, and both runs' final points.
+  const ReportResult page = write_bench_report(dir / "out", points);
+  EXPECT_EQ(page.plots, 2) << page.note;
+  const std::string html = testing::slurp(page.path);
+  size_t frames = 0;
+  for (size_t at = html.find("<iframe class=\"plot\""); at != std::string::npos; at = html.find("<iframe class=\"plot\"", at + 1))
+    ++frames;
+  EXPECT_EQ(frames, 2u);
+  for (const BenchPoint& p : points) EXPECT_NE(html.find("<td>" + p.run + "</td>"), std::string::npos) << p.run;
+  EXPECT_FALSE(fs::exists(dir / "out" / ".report_tmp"));
   // Resuming with everything finished trains nothing and keeps every point.
   reported = 0;
   const std::vector<BenchPoint> again = run_bench(grid, dir / "out", true, stop, [&](const BenchPoint&) { ++reported; });

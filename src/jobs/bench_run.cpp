@@ -14,7 +14,7 @@
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/image_io.hpp"
-#include "desplat/eval/line_plot.hpp"
+#include "desplat/eval/plot.hpp"
 #include "desplat/eval/mask_metrics.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/jobs/training_run.hpp"
@@ -224,6 +224,20 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
   return points;
 }
 
+namespace {
+
+// One PNG through eval/plot.hpp (gnuplot), written atomically; gnuplot's scratch files go in
+// a hidden folder next to it.
+void write_plot(const fs::path& file, const PlotSpec& spec, const std::vector<PlotSeries>& series) {
+  const fs::path scratch = file.parent_path() / ".plot_tmp";
+  const std::string png = draw_plot(spec, series, PlotFormat::Png, scratch);
+  std::error_code ec;
+  fs::remove_all(scratch, ec);
+  write_file_atomically(file, png);
+}
+
+}  // namespace
+
 std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vector<BenchPoint>& points) {
   std::vector<fs::path> written;
   std::vector<std::string> scenes, runs;
@@ -244,7 +258,7 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
       std::vector<PlotSeries> series;
       for (size_t r = 0; r < runs.size(); ++r) {
         const std::string& run = runs[r];
-        PlotSeries s{run, {}, {}, int(r)};  // a run keeps its color in every plot
+        PlotSeries s{run, {}, {}};
         for (const BenchPoint& p : points) {
           if (p.scene != scene || p.run != run) continue;
           if (metric.field == &BenchPoint::mask_iou && (!p.desplat || p.mask_iou < 0)) continue;
@@ -254,9 +268,8 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
       }
       if (series.empty()) continue;
       const fs::path file = out_dir / (scene + "_" + metric.file + "_vs_time.png");
-      write_image(file, draw_line_plot({scene + ": " + metric.label + " against training time", "training wall time (s)",
-                                        metric.label},
-                                       series));
+      write_plot(file, line_plot(scene + ": " + metric.label + " against training time", "training wall time (s)", metric.label),
+                 series);
       written.push_back(file);
     }
   // Final PSNR against clutter ratio, one series per run, over scenes that carry a ratio.
@@ -271,15 +284,14 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
       if (last) xy.emplace_back(100 * last->clutter_ratio, last->psnr);
     }
     std::sort(xy.begin(), xy.end());
-    PlotSeries s{run, {}, {}, int(r)};
+    PlotSeries s{run, {}, {}};
     for (const auto& [x, y] : xy) s.x.push_back(x), s.y.push_back(y);
     if (s.x.size() >= 2) clutter.push_back(s);
   }
   if (!clutter.empty()) {
     const fs::path file = out_dir / "psnr_vs_clutter.png";
-    write_image(file, draw_line_plot({"final test PSNR against clutter ratio", "cluttered training views (%)",
-                                      "test PSNR (dB)"},
-                                     clutter));
+    write_plot(file, line_plot("final test PSNR against clutter ratio", "cluttered training views (%)", "test PSNR (dB)"),
+               clutter);
     written.push_back(file);
   }
   return written;

@@ -15,7 +15,7 @@
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/jobs/model_folder.hpp"
-#include "desplat/sfm/subprocess.hpp"
+#include "desplat/eval/plot.hpp"
 
 namespace desplat {
 namespace {
@@ -94,87 +94,48 @@ std::string cpu_model() {
   return "unknown CPU";
 }
 
-// ---- Plots through gnuplot -------------------------------------------------------------------
+// ---- Plots (eval/plot.hpp) ---------------------------------------------------------------------
 
 struct Series {
-  std::string title;
+  std::string label;
   std::vector<std::pair<double, double>> points;
 };
 
-struct Plot {
-  std::string title, xlabel, ylabel;
-  std::vector<Series> series;
-  bool histogram = false;  // one bar per point of the first series, labelled by `bar_labels`
-  std::vector<std::string> bar_labels;
-};
-
-// gnuplot's script: the data inline as datablocks, SVG with its mouse script embedded.
-std::string gnuplot_script(const Plot& p, const fs::path& svg) {
-  std::ostringstream s;
-  s << "set terminal svg size 620,340 dynamic mouse standalone enhanced font 'sans,11'\n"
-    << "set output '" << svg.string() << "'\n"
-    << "set title '" << p.title << "'\nset xlabel '" << p.xlabel << "'\nset ylabel '" << p.ylabel << "'\n"
-    << "set grid\nset key box opaque bottom right\n";
-  for (size_t k = 0; k < p.series.size(); ++k) {
-    s << "$D" << k << " << EOD\n";
-    for (size_t i = 0; i < p.series[k].points.size(); ++i) {
-      const auto& [x, y] = p.series[k].points[i];
-      if (p.histogram) s << '"' << p.bar_labels[i] << "\" " << y << "\n";
-      else s << x << ' ' << y << "\n";
-    }
-    s << "EOD\n";
-  }
-  if (p.histogram) {
-    s << "set style fill solid 0.7\nset boxwidth 0.6\nset yrange [0:*]\nunset key\n"
-      << "plot $D0 using 0:2:xtic(1) with boxes title '" << p.series[0].title << "'\n";
-    return s.str();
-  }
-  s << "plot ";
-  for (size_t k = 0; k < p.series.size(); ++k)
-    s << (k ? ", " : "") << "$D" << k << " using 1:2 with "
-      << (p.series[k].points.size() < 12 ? "linespoints pt 7" : "lines") << " lw 2 title '" << p.series[k].title
-      << "'";
-  s << "\n";
-  return s.str();
-}
-
+// SVG plots for the page; a plot that cannot be drawn leaves a note instead of failing the run.
 class Plotter {
  public:
-  explicit Plotter(fs::path tmp) : tmp_(std::move(tmp)) {
-    gnuplot_ = find_executable("gnuplot");
-    if (!gnuplot_) note_ = "gnuplot is not installed (scripts/install_deps.sh installs it): no plots";
-  }
+  explicit Plotter(fs::path scratch) : scratch_(std::move(scratch)) {}
   ~Plotter() {
     std::error_code ec;
-    fs::remove_all(tmp_, ec);
+    fs::remove_all(scratch_, ec);
   }
 
-  // The SVG's text, or "" (with note() saying why) when it could not be drawn.
-  std::string svg(const Plot& p) {
-    if (!gnuplot_) return "";
-    const bool empty = std::all_of(p.series.begin(), p.series.end(), [](const Series& s) { return s.points.empty(); });
-    if (empty) return "";
-    std::error_code ec;
-    fs::create_directories(tmp_, ec);
-    const fs::path script = tmp_ / "plot.gp", out = tmp_ / "plot.svg";
-    fs::remove(out, ec);
-    write_file_atomically(script, gnuplot_script(p, out));
-    std::string output;
-    const ProcessExit e = run_subprocess({gnuplot_->string(), script.string()},
-                                         [&](std::string_view chunk) { output += chunk; }, 60);
-    if (!e.ok() || !fs::exists(out)) {
-      note_ = "gnuplot failed on '" + p.title + "': " + output;
+  // The SVG's text, or "" when there is nothing to plot or it could not be drawn (note()).
+  std::string svg(const PlotSpec& spec, const std::vector<Series>& series) {
+    std::vector<PlotSeries> plot;
+    for (const Series& s : series) {
+      if (s.points.empty()) continue;
+      PlotSeries p{s.label, {}, {}};
+      for (const auto& [x, y] : s.points) p.x.push_back(x), p.y.push_back(y);
+      plot.push_back(std::move(p));
+    }
+    if (plot.empty()) return "";
+    PlotSpec sized = spec;
+    sized.width = 620, sized.height = 340;
+    try {
+      std::string svg = draw_plot(sized, plot, PlotFormat::Svg, scratch_);
+      ++drawn_;
+      return svg;
+    } catch (const std::exception& e) {  // PlotError, or no finite point
+      note_ = e.what();
       return "";
     }
-    ++drawn_;
-    return read_bytes(out);
   }
   int drawn() const { return drawn_; }
   const std::string& note() const { return note_; }
 
  private:
-  fs::path tmp_;
-  std::optional<fs::path> gnuplot_;
+  fs::path scratch_;
   std::string note_;
   int drawn_ = 0;
 };
@@ -290,12 +251,11 @@ std::string curves(const json& m, Plotter& plotter) {
   std::vector<Series> count_series{statics};
   if (m.value("mode", "") == "desplat") count_series.push_back(distractors);
   std::string s = "<h2>Curves</h2>\n";
-  s += plot_frame(plotter.svg({"loss against step", "step", "loss", {loss}, false, {}}), "loss");
-  s += plot_frame(plotter.svg({"PSNR against step", "step", "PSNR [dB]", psnr_series, false, {}}), "psnr");
-  s += plot_frame(plotter.svg({"Gaussians against step", "step", "Gaussians", count_series, false, {}}), "gaussians");
-  s += plot_frame(plotter.svg({"PSNR against wall time", "wall time [s]", "PSNR [dB]", time_series, false, {}}),
-                  "psnr-time");
-  s += plot_frame(plotter.svg({"static Gaussians against wall time", "wall time [s]", "Gaussians", {count_time}, false, {}}),
+  s += plot_frame(plotter.svg(line_plot("loss against step", "step", "loss"), {loss}), "loss");
+  s += plot_frame(plotter.svg(line_plot("PSNR against step", "step", "PSNR [dB]"), psnr_series), "psnr");
+  s += plot_frame(plotter.svg(line_plot("Gaussians against step", "step", "Gaussians"), count_series), "gaussians");
+  s += plot_frame(plotter.svg(line_plot("PSNR against wall time", "wall time [s]", "PSNR [dB]"), time_series), "psnr-time");
+  s += plot_frame(plotter.svg(line_plot("static Gaussians against wall time", "wall time [s]", "Gaussians"), {count_time}),
                   "gaussians-time");
   return s;
 }
@@ -316,8 +276,9 @@ std::string step_breakdown(const json& m, Plotter& plotter) {
   }
   table += row("total", fixed(1000 * number(t, "total", 0), 1) + " ms (median over " +
                             std::to_string(t.value("steps_measured", 0)) + " full-resolution steps)");
-  Plot p{"median full-resolution step", "", "ms", {ms}, true, labels};
-  return "<h2>Time of a step</h2>\n" + plot_frame(plotter.svg(p), "step-time") + table + "</table>\n";
+  PlotSpec p = line_plot("median full-resolution step", "", "ms");
+  p.bars = true, p.bar_labels = labels;
+  return "<h2>Time of a step</h2>\n" + plot_frame(plotter.svg(p, {ms}), "step-time") + table + "</table>\n";
 }
 
 const char* kStyle = R"(<style>
@@ -345,7 +306,66 @@ window.addEventListener('load', function () {
 });
 </script>)";
 
+std::string page_start(const std::string& title) {
+  return "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + escape_html(title) +
+         "</title>" + kStyle + kSelfCheck + "</head><body>\n<h1>" + escape_html(title) + "</h1>\n";
+}
+
+std::string note_paragraph(const Plotter& plotter) {
+  return plotter.note().empty() ? "" : "<p class=\"note\">" + escape_html(plotter.note()) + "</p>\n";
+}
+
 }  // namespace
+
+ReportResult write_bench_report(const fs::path& out_dir, const std::vector<BenchPoint>& points) {
+  Plotter plotter(out_dir / ".report_tmp");
+  std::vector<std::string> scenes, runs;
+  for (const BenchPoint& p : points) {
+    if (std::find(scenes.begin(), scenes.end(), p.scene) == scenes.end()) scenes.push_back(p.scene);
+    if (std::find(runs.begin(), runs.end(), p.run) == runs.end()) runs.push_back(p.run);
+  }
+  std::string body = "<h2>Accuracy against training time</h2>\n";
+  for (const std::string& scene : scenes) {
+    std::vector<Series> psnr, iou;
+    for (const std::string& run : runs) {
+      Series p{run, {}}, m{run, {}};
+      for (const BenchPoint& b : points) {
+        if (b.scene != scene || b.run != run) continue;
+        p.points.push_back({b.train_seconds, b.psnr});
+        if (b.desplat && b.mask_iou >= 0) m.points.push_back({b.train_seconds, b.mask_iou});
+      }
+      psnr.push_back(p), iou.push_back(m);
+    }
+    body += plot_frame(plotter.svg(line_plot(scene + ": test PSNR against training time", "training wall time [s]",
+                                             "test PSNR [dB]"), psnr), scene + " psnr");
+    body += plot_frame(plotter.svg(line_plot(scene + ": distractor mask IoU against training time",
+                                             "training wall time [s]", "mask IoU"), iou), scene + " iou");
+  }
+  body += "<h2>Final point of every run</h2>\n<table><tr><th>scene</th><th>run</th><th>steps</th><th>training "
+          "time</th><th>test PSNR</th><th>SSIM</th><th>mask IoU</th><th>Gaussians static + distractor</th></tr>\n";
+  for (const std::string& scene : scenes)
+    for (const std::string& run : runs) {
+      const BenchPoint* last = nullptr;
+      for (const BenchPoint& b : points)
+        if (b.scene == scene && b.run == run && (!last || b.step > last->step)) last = &b;
+      if (!last) continue;
+      body += "<tr><td>" + escape_html(scene) + "</td><td>" + escape_html(run) + "</td><td>" +
+              std::to_string(last->step) + "</td><td>" + duration(last->train_seconds) + "</td><td>" +
+              fixed(last->psnr, 2) + " dB</td><td>" + fixed(last->ssim, 4) + "</td><td>" +
+              (last->mask_iou >= 0 ? fixed(last->mask_iou, 3) : std::string("—")) + "</td><td>" +
+              std::to_string(last->static_gaussians) + " + " + std::to_string(last->distractor_gaussians) +
+              "</td></tr>\n";
+    }
+  body += "</table>\n<p>Every measured point: <code>bench.csv</code> in this folder.</p>\n";
+  const std::string html = page_start("desplat benchmark report") +
+                           row("machine", cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) +
+                                              " hardware threads")
+                               .insert(0, "<table>\n") +
+                           "</table>\n" + note_paragraph(plotter) + body + "</body></html>\n";
+  ReportResult r{out_dir / "report.html", plotter.drawn(), plotter.note()};
+  write_file_atomically(r.path, html);
+  return r;
+}
 
 ReportResult write_report(const fs::path& model_dir) {
   const ModelFolder model(model_dir);
@@ -358,13 +378,10 @@ ReportResult write_report(const fs::path& model_dir) {
     }
   }
   Plotter plotter(model_dir / ".report_tmp");
-  std::string html = "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>desplat report: " +
-                     escape_html(fs::absolute(model_dir).filename().string()) + "</title>" + kStyle + kSelfCheck +
-                     "</head><body>\n<h1>desplat training report</h1>\n";
+  std::string html = page_start("desplat training report: " + fs::absolute(model_dir).filename().string());
   std::string body = summary(metrics, config) + curves(metrics, plotter) + step_breakdown(metrics, plotter) +
                      test_views(metrics, model_dir) + decomposition(metrics, model_dir);
-  if (!plotter.note().empty()) html += "<p class=\"note\">" + escape_html(plotter.note()) + "</p>\n";
-  html += body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";
+  html += note_paragraph(plotter) + body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";
   ReportResult r{model_dir / "report.html", plotter.drawn(), plotter.note()};
   write_file_atomically(r.path, html);
   return r;

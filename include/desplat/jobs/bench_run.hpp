@@ -27,6 +27,8 @@
 // <scene>_psnr_vs_time.png, <scene>_ssim_vs_time.png, <scene>_iou_vs_time.png (scenes with
 // masks, DeSplat runs), and psnr_vs_clutter.png when two or more scenes carry a clutter ratio
 // (scene.json from desplat_synth): final test PSNR per run against the scene's clutter ratio.
+// The plots are drawn by gnuplot (eval/plot.hpp); desplat_bench also writes report.html
+// (jobs/report.hpp: write_bench_report).
 #pragma once
 
 #include <atomic>

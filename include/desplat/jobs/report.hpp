@@ -19,6 +19,9 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
+
+#include "desplat/jobs/bench_run.hpp"
 
 namespace desplat {
 
@@ -31,5 +34,10 @@ struct ReportResult {
 // Throws std::invalid_argument naming the file when metrics.json or config.json is missing or
 // not valid, and ImageError/AtomicWriteError when a render cannot be read or the page written.
 ReportResult write_report(const std::filesystem::path& model_dir);
+
+// desplat_bench's page, <out_dir>/report.html: per scene, test PSNR (and mask IoU for DeSplat
+// runs on scenes with masks) against training wall time, one curve per run, then the final
+// point of every (scene, run) and every measured point as a table.
+ReportResult write_bench_report(const std::filesystem::path& out_dir, const std::vector<BenchPoint>& points);
 
 }  // namespace desplat
