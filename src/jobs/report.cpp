@@ -16,6 +16,9 @@
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/jobs/model_folder.hpp"
 #include "desplat/eval/plot.hpp"
+#include "desplat/io/colmap.hpp"
+#include "desplat/io/ply.hpp"
+#include "jobs/splat_viewer.hpp"
 
 namespace desplat {
 namespace {
@@ -306,6 +309,47 @@ window.addEventListener('load', function () {
 });
 </script>)";
 
+// The first test view's camera (else the first training view's), from the scene's COLMAP model,
+// in the PLY's frame; nullopt when the scene cannot be read (moved since training).
+std::optional<ViewerCamera> starting_camera(const json& config) {
+  try {
+    const json& scene = config.at("scene");
+    const colmap::Model model = colmap::read_model(fs::path(scene.at("data_dir").get<std::string>()) / "sparse" / "0");
+    std::vector<std::string> names = scene.value("test_views", std::vector<std::string>{});
+    for (const std::string& n : scene.value("train_views", std::vector<std::string>{})) names.push_back(n);
+    for (const std::string& name : names)
+      for (const auto& [id, image] : model.images) {
+        if (image.name != name) continue;
+        const colmap::Camera& cam = model.cameras.at(image.camera_id);
+        const std::string params = colmap::camera_model_info(cam.model).param_names;
+        const bool one_focal = params.rfind("f,", 0) == 0;  // SIMPLE_*, RADIAL*, FOV: f, cx, cy, …
+        ViewerCamera c;
+        const auto [w, x, y, z] = image.qvec_wxyz;
+        c.R = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+               2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+               2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+        c.t = image.tvec;
+        c.fx = cam.params[0];
+        c.fy = one_focal ? cam.params[0] : cam.params[1];
+        c.cx = cam.params[one_focal ? 1 : 2];
+        c.cy = cam.params[one_focal ? 2 : 3];
+        c.width = int(cam.width), c.height = int(cam.height);
+        return c;
+      }
+  } catch (const std::exception&) {  // no model to start from: the viewer frames the Gaussians
+  }
+  return std::nullopt;
+}
+
+std::string viewer(const fs::path& model_dir, const json& config) {
+  const fs::path ply = model_dir / "point_cloud.ply";
+  if (!fs::exists(ply)) return "";
+  std::array<float, 3> bg{0, 0, 0};
+  const json train = config.value("train", json::object());
+  if (train.contains("eval_background")) bg = train["eval_background"].get<std::array<float, 3>>();
+  return splat_viewer_section(read_gaussian_ply(ply), starting_camera(config), bg);
+}
+
 std::string page_start(const std::string& title) {
   return "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + escape_html(title) +
          "</title>" + kStyle + kSelfCheck + "</head><body>\n<h1>" + escape_html(title) + "</h1>\n";
@@ -379,8 +423,9 @@ ReportResult write_report(const fs::path& model_dir) {
   }
   Plotter plotter(model_dir / ".report_tmp");
   std::string html = page_start("desplat training report: " + fs::absolute(model_dir).filename().string());
-  std::string body = summary(metrics, config) + curves(metrics, plotter) + step_breakdown(metrics, plotter) +
-                     test_views(metrics, model_dir) + decomposition(metrics, model_dir);
+  std::string body = summary(metrics, config) + viewer(model_dir, config) + curves(metrics, plotter) +
+                     step_breakdown(metrics, plotter) + test_views(metrics, model_dir) +
+                     decomposition(metrics, model_dir);
   html += note_paragraph(plotter) + body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";
   ReportResult r{model_dir / "report.html", plotter.drawn(), plotter.note()};
   write_file_atomically(r.path, html);
