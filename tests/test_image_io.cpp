@@ -167,11 +167,14 @@ TEST(ImageIo, TruncatedJpegIsAnErrorThatNamesTheFile) {
       const std::string error = testing::error_of<ImageError>([&] { read_image_rgb(cut); });
       EXPECT_CONTAINS(error, cut.string());
       EXPECT_CONTAINS(error, "truncated");
+      // The photo reader of the editing tools (desplat_occlude) refuses it too.
+      EXPECT_CONTAINS(testing::error_of<ImageError>([&] { read_photo_file(cut); }), "truncated");
       fs::remove(cut);
     }
     const fs::path trailer = temp("trailer.jpg");
     std::ofstream(trailer, std::ios::binary) << bytes << std::string(700, '\0') << "vendor data \xff\xd8";
     EXPECT_EQ(read_image_rgb(trailer).pixels, whole.pixels) << photo;
+    EXPECT_NO_THROW(read_photo_file(trailer));
     fs::remove(trailer);
   }
   // A JPEG written by OpenImageIO itself reads back.

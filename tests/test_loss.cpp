@@ -12,7 +12,9 @@
 namespace desplat {
 namespace {
 
-double reference_ssim(const std::vector<double>& x, const std::vector<double>& y, int w, int h) {
+// With `keep`, only window positions whose center pixel is kept count.
+double reference_ssim(const std::vector<double>& x, const std::vector<double>& y, int w, int h,
+                      const std::vector<float>* keep = nullptr) {
   double g1[11], sum = 0;
   for (int i = 0; i < 11; ++i) sum += g1[i] = std::exp(-0.5 * (i - 5) * (i - 5) / (1.5 * 1.5));
   const double c1 = 1e-4, c2 = 9e-4;
@@ -21,6 +23,7 @@ double reference_ssim(const std::vector<double>& x, const std::vector<double>& y
   for (int ch = 0; ch < 3; ++ch)
     for (int oy = 0; oy + 11 <= h; ++oy)
       for (int ox = 0; ox + 11 <= w; ++ox) {
+        if (keep && (*keep)[(oy + 5) * w + ox + 5] == 0) continue;
         double mx = 0, my = 0, xx = 0, yy = 0, xy = 0;
         for (int i = 0; i < 11; ++i)
           for (int j = 0; j < 11; ++j) {
@@ -125,25 +128,7 @@ double reference_masked_loss(const std::vector<double>& x, const std::vector<dou
   for (size_t i = 0; i < x.size(); ++i) l1 += keep[i / 3] * std::abs(x[i] - y[i]), n += keep[i / 3];
   std::vector<double> kx(x.size()), ky(y.size());
   for (size_t i = 0; i < x.size(); ++i) kx[i] = keep[i / 3] * x[i], ky[i] = keep[i / 3] * y[i];
-  double g1[11], sum = 0;
-  for (int i = 0; i < 11; ++i) sum += g1[i] = std::exp(-0.5 * (i - 5) * (i - 5) / (1.5 * 1.5));
-  double total = 0, count = 0;
-  for (int ch = 0; ch < 3; ++ch)
-    for (int oy = 0; oy + 11 <= h; ++oy)
-      for (int ox = 0; ox + 11 <= w; ++ox) {
-        if (keep[(oy + 5) * w + ox + 5] == 0) continue;
-        double mx = 0, my = 0, xx = 0, yy = 0, xy = 0;
-        for (int i = 0; i < 11; ++i)
-          for (int j = 0; j < 11; ++j) {
-            const double wgt = g1[i] * g1[j] / (sum * sum);
-            const double a = kx[3 * ((oy + i) * w + ox + j) + ch], b = ky[3 * ((oy + i) * w + ox + j) + ch];
-            mx += wgt * a, my += wgt * b, xx += wgt * a * a, yy += wgt * b * b, xy += wgt * a * b;
-          }
-        const double sx = xx - mx * mx, sy = yy - my * my, sxy = xy - mx * my;
-        total += ((2 * mx * my + 1e-4) * (2 * sxy + 9e-4)) / ((mx * mx + my * my + 1e-4) * (sx + sy + 9e-4));
-        ++count;
-      }
-  return (1 - lambda) * l1 / n + lambda * (1 - total / count);
+  return (1 - lambda) * l1 / n + lambda * (1 - reference_ssim(kx, ky, w, h, &keep));
 }
 
 // A blob of ignored pixels in a corner (covering some window centers, not all) plus a few

@@ -3,6 +3,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "desplat/io/jpeg_end.hpp"
 #include "io/image_read_helpers.hpp"
 #include "io/image_write_helpers.hpp"
 
@@ -24,6 +25,11 @@ PhotoFile read_photo_file(const std::filesystem::path& path) {
   p.image.pixels.resize(size_t(spec.width) * spec.height * spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, p.image.pixels.data()))
     throw ImageError(path.string() + ": cannot decode the image: " + in->geterror());
+  // A truncated JPEG decodes "successfully" with grey rows: an editing tool would write the
+  // grey back as a valid photo.
+  if (p.format == "jpeg" && !jpeg_reaches_end_marker(path))
+    throw ImageError(path.string() + ": the JPEG is truncated or damaged: its data ends before the end-of-image "
+                                     "marker (a decoder would fill the missing part with grey)");
   return p;
 }
 

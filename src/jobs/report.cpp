@@ -18,6 +18,7 @@
 #include "desplat/eval/plot.hpp"
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/ply.hpp"
+#include "jobs/base64.hpp"
 #include "jobs/splat_viewer.hpp"
 
 namespace desplat {
@@ -34,21 +35,6 @@ std::string read_bytes(const fs::path& path) {
   return s.str();
 }
 
-std::string base64(const std::string& bytes) {
-  static const char* const k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  out.reserve((bytes.size() + 2) / 3 * 4);
-  for (size_t i = 0; i < bytes.size(); i += 3) {
-    const uint32_t b0 = uint8_t(bytes[i]), b1 = i + 1 < bytes.size() ? uint8_t(bytes[i + 1]) : 0,
-                   b2 = i + 2 < bytes.size() ? uint8_t(bytes[i + 2]) : 0;
-    const uint32_t v = b0 << 16 | b1 << 8 | b2;
-    out += k[v >> 18 & 63];
-    out += k[v >> 12 & 63];
-    out += i + 1 < bytes.size() ? k[v >> 6 & 63] : '=';
-    out += i + 2 < bytes.size() ? k[v & 63] : '=';
-  }
-  return out;
-}
 
 std::string escape_html(const std::string& s) {
   std::string out;

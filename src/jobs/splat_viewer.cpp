@@ -2,6 +2,8 @@
 // script sorts and draws them.
 #include "jobs/splat_viewer.hpp"
 
+#include "jobs/base64.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -13,21 +15,6 @@ namespace {
 
 constexpr int kFloatsPerSplat = 13;  // mean (3), covariance xx xy xz yy yz zz (6), rgba (4)
 
-std::string base64(const void* data, size_t size) {
-  static const char* const k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  const auto* bytes = static_cast<const uint8_t*>(data);
-  std::string out;
-  out.reserve((size + 2) / 3 * 4);
-  for (size_t i = 0; i < size; i += 3) {
-    const uint32_t v = uint32_t(bytes[i]) << 16 | (i + 1 < size ? uint32_t(bytes[i + 1]) << 8 : 0) |
-                       (i + 2 < size ? uint32_t(bytes[i + 2]) : 0);
-    out += k[v >> 18 & 63];
-    out += k[v >> 12 & 63];
-    out += i + 1 < size ? k[v >> 6 & 63] : '=';
-    out += i + 2 < size ? k[v & 63] : '=';
-  }
-  return out;
-}
 
 float sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
