@@ -250,6 +250,14 @@ TEST(Training, MaskedPaintedOccluderTrainsExactlyAsTheCleanCapture) {
   clean.train.pop_back();
   for (size_t v = 0; v < clean.train.size(); v += 2) mask_rectangle(clean.train[v], 9 + 2 * int(v), 13, 17, 15);
   mask_rectangle(clean.test[0], 30, 5, 20, 20);
+  // Tracks: every third point is seen by two photos only (transient), every point by every
+  // training view; with the "seed" action transient points become distractors where they
+  // project, but never on an ignored pixel.
+  clean.point_track_images.assign(clean.points.size(), 5);
+  for (size_t i = 0; i < clean.points.size(); i += 3) clean.point_track_images[i] = 2;
+  std::vector<int32_t> all_views(clean.train.size());
+  for (size_t v = 0; v < all_views.size(); ++v) all_views[v] = int32_t(v);
+  clean.point_train_views.assign(clean.points.size(), all_views);
   TrainingData painted = clean;
   for (size_t v = 0; v < painted.train.size(); v += 2) paint_red(painted.train[v], 9 + 2 * int(v), 13, 17, 15);
   paint_red(painted.test[0], 30, 5, 20, 20);
@@ -259,7 +267,9 @@ TEST(Training, MaskedPaintedOccluderTrainsExactlyAsTheCleanCapture) {
   TrainConfig cfg = short_config(320);
   cfg.distractors.enabled = true;
   cfg.random_background = true;
+  cfg.transient_points.action = TransientPointAction::seed;
   Trainer a(clean, cfg), b(painted, cfg), control(unmasked, cfg);
+  ASSERT_GT(a.transient_seeded, 0);  // the seeding really ran
   for (int i = 0; i < 320; ++i) a.step(), b.step(), control.step();
 
   ASSERT_EQ(a.gaussians().size(), b.gaussians().size());

@@ -347,7 +347,7 @@ void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) 
       const std::vector<int32_t>& observers = data_.point_train_views[i];
       if (!std::binary_search(observers.begin(), observers.end(), int32_t(v))) continue;
       const long long pixel = c.pixel_of(data_.points[i]);
-      if (pixel < 0) continue;
+      if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;  // off screen or ignored
       uint8_t& m = mask[size_t(pixel)];
       count += !m;
       m = 1;
