@@ -61,6 +61,8 @@ void print_summary(const sfm::SfmResult& r) {
               r.num_registered, r.num_photos, r.num_points, format_seconds(r.seconds).c_str(),
               format_seconds(r.extract_seconds).c_str(), sfm::matcher_name(r.matcher),
               format_seconds(r.match_seconds).c_str(), format_seconds(r.map_seconds).c_str());
+  std::printf("mean track length %.2f images, mean reprojection error %.2f px\n", r.mean_track_length,
+              r.mean_reprojection_error);
   std::printf("model:  %s\n", r.sparse_dir.c_str());
   std::printf("images: %s\n", r.images_dir.c_str());
   std::printf("log:    %s\n", r.log.c_str());

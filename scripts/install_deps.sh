@@ -11,6 +11,6 @@ $SUDO apt-get install -y --no-install-recommends \
   libeigen3-dev libglm-dev libceres-dev \
   libopencv-dev libopenimageio-dev openimageio-tools \
   libgtest-dev libgmock-dev libbenchmark-dev \
-  nlohmann-json3-dev libcli11-dev libnanoflann-dev \
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev libsqlite3-dev \
   colmap clang libclang-rt-14-dev libomp-dev \
   gnuplot-nox chromium

@@ -3,6 +3,7 @@
 // from all 50 photos at twice the resolution), and every failure path driven by a fake
 // `colmap` shell script placed first on PATH.
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -18,6 +19,7 @@
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/sfm/sfm.hpp"
+#include "sfm/match_evidence.hpp"
 #include "support/expect.hpp"
 #include "support/fox_scene.hpp"
 #include "support/scoped_env.hpp"
@@ -56,6 +58,7 @@ sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
 //   FAKE_COLMAP_FAIL stage  that stage prints an error and exits 3
 //   FAKE_COLMAP_KILL stage  that stage kills itself with SIGKILL
 //   FAKE_COLMAP_HANG stage  that stage sleeps for a minute
+//   FAKE_COLMAP_DB file     feature_extractor copies it to --database_path
 //   FAKE_COLMAP_MODELS dir  mapper copies dir/* into --output_path; otherwise mapper prints
 //                           colmap's "failed to create sparse model" and exits
 //                           $FAKE_COLMAP_NO_MODEL_EXIT (default 1, as colmap 3.8 does)
@@ -66,6 +69,7 @@ out=""
 prev=""
 for a in "$@"; do
   [ "$prev" = "--output_path" ] && out="$a"
+  [ "$prev" = "--database_path" ] && db="$a"
   prev="$a"
 done
 case "$stage" in
@@ -73,6 +77,7 @@ case "$stage" in
   *_matcher) printf "Matching block [1/1, 1/1]"; echo " in 0.1s" ;;
   mapper) echo "Initializing with image pair #1 and #2"; echo "Registering image #3 (3)" ;;
 esac
+if [ "$stage" = feature_extractor ] && [ -n "$FAKE_COLMAP_DB" ]; then cp "$FAKE_COLMAP_DB" "$db"; fi
 if [ "$stage" = "$FAKE_COLMAP_FAIL" ]; then echo "fake colmap: disk on fire" >&2; exit 3; fi
 if [ "$stage" = "$FAKE_COLMAP_KILL" ]; then kill -9 $$; fi
 if [ "$stage" = "$FAKE_COLMAP_HANG" ]; then exec sleep 60; fi
@@ -251,11 +256,27 @@ TEST(SfmReal, SevenFoxPhotosMatchTheReferenceModelUpToASimilarity) {
   const sfm::SfmResult r = sfm::run_sfm(o);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("real colmap on 7 photos: %.1f s (run_sfm %.1f s: extract %.1f, match %.1f, map %.1f), %d registered, "
-              "%d points\n",
-              seconds, r.seconds, r.extract_seconds, r.match_seconds, r.map_seconds, r.num_registered, r.num_points);
+              "%d points, mean track length %.2f, mean reprojection error %.3f px\n",
+              seconds, r.seconds, r.extract_seconds, r.match_seconds, r.map_seconds, r.num_registered, r.num_points,
+              r.mean_track_length, r.mean_reprojection_error);
 
   EXPECT_GE(r.num_registered, 5);
   EXPECT_EQ(r.num_photos, 7);
+  // colmap's own database, read back: every photo with its features and verified pairs (these
+  // 7 consecutive frames overlap); the model's statistics from its points3D.bin.
+  const auto evidence = sfm::read_match_evidence(o.out / "database.db");
+  ASSERT_EQ(evidence.size(), 7u);
+  for (const auto& [name, e] : evidence) {
+    EXPECT_GT(e.features, 100) << name;
+    EXPECT_GE(e.matched_photos, 1) << name;
+    EXPECT_LE(e.matched_photos, 6) << name;
+    EXPECT_GE(e.best_inliers, 15) << name;  // colmap's minimum for a verified pair
+  }
+  EXPECT_EQ(int(r.unregistered.size()), 7 - r.num_registered);
+  for (const auto& lost : r.unregistered) EXPECT_EQ(lost.reason.find("could not be read"), std::string::npos);
+  EXPECT_GT(r.mean_track_length, 2.0);
+  EXPECT_GT(r.mean_reprojection_error, 0.0);
+  EXPECT_LT(r.mean_reprojection_error, 4.0);  // colmap's default filter: 4 px
   EXPECT_EQ(r.sparse_dir, o.out / "sparse" / "0");
   EXPECT_TRUE(fs::is_symlink(o.out / "images"));
   EXPECT_TRUE(fs::exists(o.out / "database.db"));
@@ -412,7 +433,8 @@ TEST_F(FakeColmap, TooFewRegisteredKeepsThePartialModel) {
   EXPECT_CONTAINS(e.what(), "--min-registered 2");
   // The model holds p0 and p1: the message names the four photos it lost.
   EXPECT_CONTAINS(e.what(), "4 of 6 photos could not be placed by structure from motion (not in the model, so not "
-                            "trained on): p2.png, p3.png, p4.png, p5.png");
+                            "trained on):\n  p2.png: ");
+  EXPECT_CONTAINS(e.what(), "\n  p5.png: ");
   EXPECT_EQ(colmap::read_model(options_.out / "sparse" / "0").images.size(), 2u);
 
   options_.overwrite = true;  // what the message suggests
@@ -489,27 +511,77 @@ TEST_F(FakeColmap, FindsPhotosRecursivelyAndNamesEveryFileItSkips) {
   EXPECT_CONTAINS(scan.skipped[3].reason, "not a photo");
 }
 
-TEST_F(FakeColmap, ResultNamesSkippedFilesAndUnplacedPhotos) {
-  give_models({5});  // p0..p4 of p0..p5
+// A colmap database with the tables and columns read_match_evidence uses, as colmap 3.8
+// writes them: images, keypoints (rows = features), two_view_geometries (rows = inliers,
+// pair_id = id1 · 2147483647 + id2).
+void write_colmap_database(const fs::path& path, const std::vector<std::pair<std::string, int>>& features,
+                           const std::vector<std::tuple<int, int, int>>& verified_pairs) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  std::string sql =
+      "CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT UNIQUE, camera_id INTEGER);"
+      "CREATE TABLE keypoints (image_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);"
+      "CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB, "
+      "config INTEGER);";
+  for (size_t i = 0; i < features.size(); ++i)
+    sql += "INSERT INTO images VALUES (" + std::to_string(i + 1) + ", '" + features[i].first + "', 1);" +
+           "INSERT INTO keypoints VALUES (" + std::to_string(i + 1) + ", " + std::to_string(features[i].second) +
+           ", 6, NULL);";
+  for (const auto& [a, b, inliers] : verified_pairs)
+    sql += "INSERT INTO two_view_geometries VALUES (" + std::to_string(int64_t(a) * 2147483647 + b) + ", " +
+           std::to_string(inliers) + ", 2, NULL, 2);";
+  char* error = nullptr;
+  ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &error), SQLITE_OK) << (error ? error : "");
+  sqlite3_close(db);
+}
+
+TEST_F(FakeColmap, ResultNamesSkippedFilesAndEveryUnplacedPhotoWithItsReason) {
+  write_tiny_photos(photos_, 7);  // p0 … p6
   spit(photos_ / "empty.jpg", "");
+  // Models: p0-p2 (the largest) and p5 alone. Database: p3 has 40 features; p4 has 2,000 and no
+  // verified pair; p6 has 2,000 and a verified pair with p0 (50 inliers) and with p1 (20).
+  const fs::path models = tmp_.path() / "models";
+  colmap::write_model_binary(fake_model(3), models / "0");
+  colmap::Model separate = fake_model(1);
+  separate.images.begin()->second.name = "p5.png";
+  colmap::write_model_binary(separate, models / "1");
+  models_env_.emplace("FAKE_COLMAP_MODELS", models.string());
+  const fs::path db = tmp_.path() / "colmap.db";
+  write_colmap_database(db, {{"p0.png", 900}, {"p1.png", 900}, {"p2.png", 900}, {"p3.png", 40}, {"p4.png", 2000},
+                             {"p5.png", 900}, {"p6.png", 2000}},
+                        {{1, 2, 300}, {1, 7, 50}, {2, 7, 20}, {1, 3, 200}});
+  ScopedEnv db_env("FAKE_COLMAP_DB", db.string());
+  options_.min_registered = 3;
   const sfm::SfmResult r = sfm::run_sfm(options_);
-  EXPECT_EQ(r.num_photos, 6);
-  ASSERT_EQ(r.unregistered.size(), 1u);
-  EXPECT_EQ(r.unregistered[0], fs::path("p5.png"));
+  EXPECT_EQ(r.num_photos, 7);
   ASSERT_EQ(r.skipped.size(), 1u);
   EXPECT_EQ(slurp(options_.out / "image_list.txt").find("empty.jpg"), std::string::npos);
+  ASSERT_EQ(r.unregistered.size(), 4u);
   EXPECT_EQ(sfm::describe_lost_photos(r),
             "1 file(s) in the images folder were not used:\n"
             "  empty.jpg: empty file (0 bytes)\n"
-            "1 of 6 photos could not be placed by structure from motion (not in the model, so not trained on): "
-            "p5.png\n");
+            "4 of 7 photos could not be placed by structure from motion (not in the model, so not trained on):\n"
+            "  p3.png: too few features (40 features): blurred, textureless or very small?\n"
+            "  p4.png: 2000 features, but no verified match with any other photo (no overlap?)\n"
+            "  p5.png: placed in a separate model (1, 1 photos) that colmap could not join to the largest: too few "
+            "matches between the two groups\n"
+            "  p6.png: 2000 features, verified matches with 2 photo(s) (at most 50), but too few to the placed "
+            "photos for the mapper to place it\n");
 
   sfm::SfmResult many;  // long lists are cut
   many.num_photos = 30;
-  for (int i = 0; i < 25; ++i) many.unregistered.push_back(photo_name(i));
+  for (int i = 0; i < 25; ++i) many.unregistered.push_back({photo_name(i), "why"});
   EXPECT_CONTAINS(sfm::describe_lost_photos(many, 3), "25 of 30 photos could not be placed");
-  EXPECT_CONTAINS(sfm::describe_lost_photos(many, 3), ": p0.png, p1.png, p2.png ... and 22 more\n");
+  EXPECT_CONTAINS(sfm::describe_lost_photos(many, 3), "  p2.png: why\n  ... and 22 more\n");
   EXPECT_EQ(sfm::describe_lost_photos(sfm::SfmResult{}), "");
+}
+
+TEST_F(FakeColmap, WithoutADatabaseTheUnplacedPhotosAreStillNamed) {
+  give_models({5});  // p0..p4 of p0..p5; the fake writes no database
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+  ASSERT_EQ(r.unregistered.size(), 1u);
+  EXPECT_EQ(r.unregistered[0].path, fs::path("p5.png"));
+  EXPECT_CONTAINS(r.unregistered[0].reason, "database could not be read");
 }
 
 TEST_F(FakeColmap, EarlierResultsNeedOverwrite) {

@@ -148,9 +148,16 @@ json model_cost(const Trainer& t) {
 json sfm_json(const sfm::SfmResult& r) {
   json skipped = json::array(), unregistered = json::array();
   for (const sfm::SkippedFile& f : r.skipped) skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
-  for (const fs::path& p : r.unregistered) unregistered.push_back(p.generic_string());
-  return {{"photos", r.num_photos},     {"registered", r.num_registered}, {"points", r.num_points},
-          {"models", r.num_models},     {"seconds", r.seconds},           {"skipped_files", skipped},
+  for (const sfm::SkippedFile& f : r.unregistered)
+    unregistered.push_back({{"photo", f.path.generic_string()}, {"reason", f.reason}});
+  return {{"photos", r.num_photos},
+          {"registered", r.num_registered},
+          {"points", r.num_points},
+          {"mean_track_length", r.mean_track_length},
+          {"mean_reprojection_error_px", r.mean_reprojection_error},
+          {"models", r.num_models},
+          {"seconds", r.seconds},
+          {"skipped_files", skipped},
           {"unregistered_photos", unregistered}};
 }
 
@@ -245,8 +252,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     sfm_options.overwrite = true;
     sfm_options.on_progress = sfm::terminal_progress(stdout, isatty(fileno(stdout)));
     const sfm::SfmResult r = sfm::run_sfm(sfm_options);
-    std::printf("SfM: %d of %d photos registered, %d points (%.0f s)\n", r.num_registered, r.num_photos, r.num_points,
-                r.seconds);
+    std::printf("SfM: %d of %d photos registered, %d points, mean track length %.2f, mean reprojection error %.2f px "
+                "(%.0f s)\n",
+                r.num_registered, r.num_photos, r.num_points, r.mean_track_length, r.mean_reprojection_error, r.seconds);
     std::printf("%s", sfm::describe_lost_photos(r).c_str());
     sfm_summary = sfm_json(r);
     data_dir = sfm_options.out;

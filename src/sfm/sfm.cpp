@@ -17,6 +17,7 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 #include <string_view>
@@ -25,6 +26,7 @@
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/jpeg_end.hpp"
 #include "desplat/sfm/subprocess.hpp"
+#include "sfm/match_evidence.hpp"
 #include "sfm/progress.hpp"
 
 extern char** environ;
@@ -394,6 +396,7 @@ struct ModelInfo {
   int registered = -1;  // -1: unreadable
   int points = 0;
   std::set<std::string> image_names;  // as colmap wrote them: relative to images/, '/'-separated
+  double mean_track_length = 0, mean_reprojection_error = 0;  // over its 3D points [images], [px]
   std::string error;  // why it is unreadable
 };
 
@@ -415,6 +418,10 @@ std::vector<ModelInfo> collect_models(const fs::path& sparse_root) {
       info.registered = static_cast<int>(m.images.size());
       info.points = static_cast<int>(m.points.size());
       for (const auto& [id, image] : m.images) info.image_names.insert(image.name);
+      for (const auto& [id, point] : m.points) {
+        info.mean_track_length += double(point.track.size()) / double(m.points.size());
+        info.mean_reprojection_error += point.error / double(m.points.size());
+      }
     } catch (const colmap::ColmapError& err) {
       info.error = err.what();  // ranked last; it keeps a numbered folder so nothing is lost
     }
@@ -474,19 +481,52 @@ bool said_no_model(const StageOutput& s) {
                                   "The full output is in " + in_quotes(c.layout.log));
 }
 
-std::vector<fs::path> photos_not_in(const ModelInfo& model, const std::vector<fs::path>& photos) {
-  std::vector<fs::path> missing;
+// Fewer features than this rarely give the 30 inliers colmap's mapper needs to place a photo
+// (Mapper.abs_pose_min_num_inliers); a photo below it is blurred, textureless or tiny.
+constexpr int kFewFeatures = 100;
+
+// Why colmap did not put `name` in the largest model, from the other models and the database.
+std::string why_not_placed(const std::string& name, const std::vector<ModelInfo>& models,
+                           const std::map<std::string, MatchEvidence>* evidence) {
+  for (size_t k = 1; k < models.size(); ++k)
+    if (models[k].image_names.count(name))
+      return "placed in a separate model (" + models[k].dir.filename().string() + ", " +
+             std::to_string(models[k].registered) +
+             " photos) that colmap could not join to the largest: too few matches between the two groups";
+  if (!evidence) return "not in the model (colmap's database could not be read for a reason)";
+  const auto it = evidence->find(name);
+  if (it == evidence->end()) return "colmap did not add it to its database (it could not read the photo)";
+  const MatchEvidence& e = it->second;
+  const std::string features = std::to_string(e.features) + " features";
+  if (e.features < kFewFeatures) return "too few features (" + features + "): blurred, textureless or very small?";
+  if (e.matched_photos == 0) return features + ", but no verified match with any other photo (no overlap?)";
+  return features + ", verified matches with " + std::to_string(e.matched_photos) + " photo(s) (at most " +
+         std::to_string(e.best_inliers) + "), but too few to the placed photos for the mapper to place it";
+}
+
+std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, const std::vector<fs::path>& photos,
+                                       const fs::path& database) {
+  std::map<std::string, MatchEvidence> evidence;
+  bool have_evidence = true;
+  try {
+    evidence = read_match_evidence(database);
+  } catch (const std::exception&) {
+    have_evidence = false;
+  }
+  std::vector<SkippedFile> missing;
   for (const fs::path& p : photos)
-    if (!model.image_names.count(p.generic_string())) missing.push_back(p);
+    if (!models[0].image_names.count(p.generic_string()))
+      missing.push_back({p, why_not_placed(p.generic_string(), models, have_evidence ? &evidence : nullptr)});
   return missing;
 }
 
-void check_registered(const Context& c, Matcher m, const ModelInfo& best, int min_registered,
+void check_registered(const Context& c, Matcher m, const std::vector<ModelInfo>& models, int min_registered,
                       const std::vector<fs::path>& photos) {
+  const ModelInfo& best = models[0];
   if (best.registered >= min_registered) return;
   SfmResult lost;
   lost.num_photos = c.num_photos;
-  lost.unregistered = photos_not_in(best, photos);
+  lost.unregistered = photos_not_in(models, photos, c.layout.database);
   std::string names = describe_lost_photos(lost);
   if (!names.empty() && names.back() == '\n') names.pop_back();
   fail(SfmErrorKind::TooFewRegistered,
@@ -546,11 +586,11 @@ std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
   }
   if (!r.unregistered.empty()) {
     text += std::to_string(r.unregistered.size()) + " of " + std::to_string(r.num_photos) +
-            " photos could not be placed by structure from motion (not in the model, so not trained on):";
+            " photos could not be placed by structure from motion (not in the model, so not trained on):\n";
     for (size_t i = 0; i < r.unregistered.size() && i < max_names; ++i)
-      text += (i ? ", " : " ") + r.unregistered[i].generic_string();
-    if (r.unregistered.size() > max_names) text += " ... and " + std::to_string(r.unregistered.size() - max_names) + " more";
-    text += "\n";
+      text += "  " + r.unregistered[i].path.generic_string() + ": " + r.unregistered[i].reason + "\n";
+    if (r.unregistered.size() > max_names)
+      text += "  ... and " + std::to_string(r.unregistered.size() - max_names) + " more\n";
   }
   return text;
 }
@@ -593,7 +633,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   SfmProgress done = map.last;
   done.model = 1, done.done = models[0].registered, done.finished = true;
   report(c, done);
-  check_registered(c, matcher, models[0], min_registered, scan.photos);
+  check_registered(c, matcher, models, min_registered, scan.photos);
 
   SfmResult r;
   r.images_dir = c.layout.images;
@@ -606,7 +646,9 @@ SfmResult run_sfm(const SfmOptions& o) {
   r.num_points = models[0].points;
   r.num_models = static_cast<int>(models.size());
   r.skipped = scan.skipped;
-  r.unregistered = photos_not_in(models[0], scan.photos);
+  r.unregistered = photos_not_in(models, scan.photos, c.layout.database);
+  r.mean_track_length = models[0].mean_track_length;
+  r.mean_reprojection_error = models[0].mean_reprojection_error;
   r.seconds = clock.seconds();
   r.extract_seconds = extract.seconds, r.match_seconds = match.seconds, r.map_seconds = map.seconds;
   return r;

@@ -117,7 +117,7 @@ struct SfmOptions {
   ProgressFn on_progress;               // may be empty
 };
 
-// A file in the images folder that was not handed to colmap, and why (relative path).
+// A file or photo that was left out, and why (path relative to the images folder).
 struct SkippedFile {
   std::filesystem::path path;
   std::string reason;  // "empty file (0 bytes)", "the JPEG is truncated (...)", ...
@@ -131,7 +131,12 @@ struct SfmResult {
   Matcher matcher = Matcher::Exhaustive;  // as resolved
   int num_photos = 0;                // readable photos found and handed to colmap
   std::vector<SkippedFile> skipped;  // files in the images folder that were not photos colmap can use
-  std::vector<std::filesystem::path> unregistered;  // photos handed to colmap that sparse/0 does not hold
+  // Photos handed to colmap that sparse/0 does not hold, each with the reason the other models
+  // and colmap's database give (a separate model; too few features; no verified match; matched
+  // but not placeable).
+  std::vector<SkippedFile> unregistered;
+  double mean_track_length = 0;        // images per 3D point of sparse/0
+  double mean_reprojection_error = 0;  // px, colmap's per-point error averaged over sparse/0
   int num_registered = 0;            // photos in sparse/0
   int num_points = 0;                // 3D points in sparse/0
   int num_models = 0;                // models mapper wrote

@@ -1,0 +1,22 @@
+// What colmap's database says about each photo: how many features it found and how well the
+// photo matched the others. Private to the sfm layer; used to say why a photo was not placed.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+
+namespace desplat::sfm {
+
+struct MatchEvidence {
+  int features = 0;         // SIFT keypoints colmap extracted
+  int matched_photos = 0;   // photos it shares a geometrically verified pair with
+  int best_inliers = 0;     // the largest verified match count among those pairs
+};
+
+// Per image name (as colmap stores it: relative to images/). Photos colmap never added to the
+// database are absent. Throws std::runtime_error naming the file when it cannot be read as a
+// colmap database.
+std::map<std::string, MatchEvidence> read_match_evidence(const std::filesystem::path& database);
+
+}  // namespace desplat::sfm
