@@ -163,9 +163,9 @@ std::string summary(const json& m, const json& c) {
   s += row("effects modelled",
            desplat ? "static scene + per-view distractors (DeSplat); appearance and background are not modelled"
                    : "static scene only (the Splatfacto baseline, --static-only)");
-  s += row("test PSNR / SSIM", m["mean_psnr"].is_number()
-                                   ? fixed(m["mean_psnr"].get<double>(), 2) + " dB / " + fixed(number(m, "mean_ssim"), 4)
-                                   : "no test views");
+  s += row("test PSNR / SSIM", std::isnan(number(m, "mean_psnr"))
+                                   ? "no test views"
+                                   : fixed(number(m, "mean_psnr"), 2) + " dB / " + fixed(number(m, "mean_ssim"), 4));
   s += row("Gaussians", std::to_string(m.value("gaussians", 0)) + " static + " +
                             std::to_string(cost.value("distractor_gaussians", 0)) + " distractor");
   s += row("steps", std::to_string(m.value("step", 0)));
@@ -197,7 +197,7 @@ std::string decomposition(const json& m, const fs::path& dir) {
   if (!fs::is_directory(folder)) return "";
   std::map<std::string, double> iou;
   if (m.contains("distractor_masks") && m["distractor_masks"].is_object())
-    for (const json& v : m["distractor_masks"]["views"])
+    for (const json& v : m["distractor_masks"].value("views", json::array()))
       iou[fs::path(v.value("name", "")).replace_extension(".png").string()] = number(v, "iou");
   std::vector<fs::path> files;
   for (const auto& e : fs::directory_iterator(folder))
@@ -231,9 +231,9 @@ std::string curves(const json& m, Plotter& plotter) {
       test_time.points.push_back({t, number(h, "mean_psnr")});
     }
   }
-  if (m["mean_psnr"].is_number() && !loss.points.empty()) {  // the final evaluation
-    test_psnr.points.push_back({double(m.value("step", 0)), m["mean_psnr"].get<double>()});
-    test_time.points.push_back({number(m, "wall_seconds_this_run"), m["mean_psnr"].get<double>()});
+  if (!std::isnan(number(m, "mean_psnr")) && !loss.points.empty()) {  // the final evaluation
+    test_psnr.points.push_back({double(m.value("step", 0)), number(m, "mean_psnr")});
+    test_time.points.push_back({number(m, "wall_seconds_this_run"), number(m, "mean_psnr")});
   }
   std::vector<Series> psnr_series{train_psnr}, time_series{psnr_time};
   if (!test_psnr.points.empty()) psnr_series.push_back(test_psnr), time_series.push_back(test_time);
