@@ -72,6 +72,19 @@ TEST(Composite, RegularizersValueAndGradient) {
   for (float g : g_ad) EXPECT_FLOAT_EQ(g, 2.0f + 0.3f / 4);
 }
 
+TEST(Composite, RegularizersWithAMaskAverageOverKeptPixelsOnly) {
+  std::vector<float> as{0.0f, 0.5f, 1.0f, 0.25f}, ad{1.0f, 0.0f, 0.5f, 0.5f}, cs(12, 0.0f), cd(12, 0.0f);
+  const std::vector<float> keep{1, 0, 1, 1};
+  std::vector<float> g_as(4, 1.0f), g_ad(4, 2.0f);
+  const double v = alpha_regularizers({cs, as}, {cd, ad}, 0.1f, 0.3f, g_as, g_ad, keep);
+  // Kept pixels 0, 2, 3: mean(1 − A_s) = (1 + 0 + 0.75)/3, mean(A_d) = (1 + 0.5 + 0.5)/3.
+  EXPECT_NEAR(v, 0.1 * 1.75 / 3 + 0.3 * 2.0 / 3, 1e-7);
+  EXPECT_EQ(g_as, (std::vector<float>{1.0f - 0.1f / 3, 1.0f, 1.0f - 0.1f / 3, 1.0f - 0.1f / 3}));
+  EXPECT_EQ(g_ad, (std::vector<float>{2.0f + 0.3f / 3, 2.0f, 2.0f + 0.3f / 3, 2.0f + 0.3f / 3}));
+  const std::vector<float> none(4, 0.0f);  // nothing kept: no value, no gradient
+  EXPECT_EQ(alpha_regularizers({cs, as}, {cd, ad}, 0.1f, 0.3f, g_as, g_ad, none), 0.0);
+}
+
 TEST(Composite, SizeMismatchIsAnError) {
   std::vector<float> c(12), a(4), a3(3), out(12);
   EXPECT_THROW(composite_layers({c, a}, {c, a3}, {0, 0, 0}, out), std::invalid_argument);

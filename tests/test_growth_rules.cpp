@@ -287,6 +287,28 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   EXPECT_EQ(d_alpha[2], 1.0f);
 }
 
+// The same three pixels with pixel 2 (unexplained by both) ignored by the user's mask: it is in
+// no count and never uncovered; the penalty averages over the two kept pixels.
+TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
+  const std::vector<float> sc = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.2f, 0.2f, 0.2f}, sa = {1, 1, 1};
+  const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
+  const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
+  std::vector<float> composite(9);
+  composite_layers({sc, sa}, {dc, da}, {0, 0, 0}, composite);
+  std::vector<float> d_alpha = {1, 1, 1};
+  std::vector<uint8_t> mask;
+  const std::vector<float> keep = {1, 1, 0};
+  const ViewResidual r =
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, {0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask, keep);
+  EXPECT_EQ(r.pixels, 2);
+  EXPECT_EQ(r.static_unexplained, 1);     // pixel 1 only
+  EXPECT_EQ(r.composite_unexplained, 1);  // pixel 0 (see above)
+  EXPECT_EQ(mask, (std::vector<uint8_t>{0, 0, 0}));
+  EXPECT_NEAR(r.penalty, 0.3 * 0.25 / 2, 1e-7);
+  EXPECT_NEAR(d_alpha[0], 1 + 0.3f / 2, 1e-7);
+  EXPECT_EQ(d_alpha[2], 1.0f);
+}
+
 TEST(TrainerRules, StatisticsRulesReachTheTrainer) {
   // Without resolution switches, normalizing each step's gradient by its own image size or
   // the sum by the refinement's is the same number: the same Gaussians are densified, in

@@ -137,8 +137,10 @@ void ModelFolder::write_config(const Config& c) const {
                         json{{"train", config_to_json(c.train)}, {"scene", c.scene.to_json()}, {"run", c.run}}.dump(2));
 }
 
+json ModelFolder::read_config_json() const { return read_json_file(config_path(), "not a desplat model folder"); }
+
 ModelFolder::Config ModelFolder::read_config() const {
-  const json j = read_json_file(config_path(), "not a desplat model folder");
+  const json j = read_config_json();
   Config c;
   try {
     c.train = config_from_json(j.at("train"));

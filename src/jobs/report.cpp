@@ -19,6 +19,7 @@
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/ply.hpp"
 #include "jobs/base64.hpp"
+#include "jobs/text_format.hpp"
 #include "jobs/splat_viewer.hpp"
 
 namespace desplat {
@@ -51,11 +52,10 @@ std::string escape_html(const std::string& s) {
   return out;
 }
 
-std::string fixed(double v, int digits) {
+// shown() that says "inf" or "n/a" for values that are not numbers (a perfect PSNR, a missing key).
+std::string shown(double v, int digits) {
   if (!std::isfinite(v)) return v > 0 ? "inf" : "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-  return buf;
+  return fixed(v, digits);
 }
 
 double number(const json& j, const char* key, double fallback = NAN) {
@@ -165,16 +165,16 @@ std::string summary(const json& m, const json& c) {
                    : "static scene only (the Splatfacto baseline, --static-only)");
   s += row("test PSNR / SSIM", std::isnan(number(m, "mean_psnr"))
                                    ? "no test views"
-                                   : fixed(number(m, "mean_psnr"), 2) + " dB / " + fixed(number(m, "mean_ssim"), 4));
+                                   : shown(number(m, "mean_psnr"), 2) + " dB / " + shown(number(m, "mean_ssim"), 4));
   s += row("Gaussians", std::to_string(m.value("gaussians", 0)) + " static + " +
                             std::to_string(cost.value("distractor_gaussians", 0)) + " distractor");
   s += row("steps", std::to_string(m.value("step", 0)));
   s += row("training time (this run)", duration(number(m, "wall_seconds_this_run")));
-  s += row("peak memory", fixed(number(m, "peak_memory_mb"), 0) + " MB");
+  s += row("peak memory", shown(number(m, "peak_memory_mb"), 0) + " MB");
   s += row("machine", cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads");
   const json& masks = m.contains("distractor_masks") ? m["distractor_masks"] : json();
   if (masks.is_object())
-    s += row("distractor masks", "mean IoU " + fixed(number(masks, "mean_iou"), 3) + " over " +
+    s += row("distractor masks", "mean IoU " + shown(number(masks, "mean_iou"), 3) + " over " +
                                      std::to_string(masks.value("occluded_views", 0)) + " occluded training views");
   return s + "</table>\n";
 }
@@ -186,7 +186,7 @@ std::string test_views(const json& m, const fs::path& dir) {
     const std::string name = v.value("name", "");
     const fs::path file = dir / "renders" / "test" / fs::path(name).replace_extension(".png");
     s += "<figure>" + (fs::exists(file) ? png_img(file, name) : "<p>(no render)</p>") + "<figcaption>" +
-         escape_html(name) + ": PSNR " + fixed(number(v, "psnr"), 2) + " dB, SSIM " + fixed(number(v, "ssim"), 4) +
+         escape_html(name) + ": PSNR " + shown(number(v, "psnr"), 2) + " dB, SSIM " + shown(number(v, "ssim"), 4) +
          "</figcaption></figure>\n";
   }
   return s;
@@ -207,7 +207,7 @@ std::string decomposition(const json& m, const fs::path& dir) {
   for (const fs::path& f : files) {
     const auto it = iou.find(f.filename().string());
     s += "<figure>" + png_img(f, f.filename().string()) + "<figcaption>" + escape_html(f.filename().string()) +
-         (it != iou.end() ? ": mask IoU " + fixed(it->second, 3) : "") + "</figcaption></figure>\n";
+         (it != iou.end() ? ": mask IoU " + shown(it->second, 3) : "") + "</figcaption></figure>\n";
   }
   return s;
 }
@@ -261,9 +261,9 @@ std::string step_breakdown(const json& m, Plotter& plotter) {
     const double v = 1000 * number(t, part, 0);
     ms.points.push_back({double(labels.size()), v});
     labels.push_back(part);
-    table += row(part, fixed(v, 1) + " ms");
+    table += row(part, shown(v, 1) + " ms");
   }
-  table += row("total", fixed(1000 * number(t, "total", 0), 1) + " ms (median over " +
+  table += row("total", shown(1000 * number(t, "total", 0), 1) + " ms (median over " +
                             std::to_string(t.value("steps_measured", 0)) + " full-resolution steps)");
   PlotSpec p = line_plot("median full-resolution step", "", "ms");
   p.bars = true, p.bar_labels = labels;
@@ -381,8 +381,8 @@ ReportResult write_bench_report(const fs::path& out_dir, const std::vector<Bench
       if (!last) continue;
       body += "<tr><td>" + escape_html(scene) + "</td><td>" + escape_html(run) + "</td><td>" +
               std::to_string(last->step) + "</td><td>" + duration(last->train_seconds) + "</td><td>" +
-              fixed(last->psnr, 2) + " dB</td><td>" + fixed(last->ssim, 4) + "</td><td>" +
-              (last->mask_iou >= 0 ? fixed(last->mask_iou, 3) : std::string("—")) + "</td><td>" +
+              shown(last->psnr, 2) + " dB</td><td>" + shown(last->ssim, 4) + "</td><td>" +
+              (last->mask_iou >= 0 ? shown(last->mask_iou, 3) : std::string("—")) + "</td><td>" +
               std::to_string(last->static_gaussians) + " + " + std::to_string(last->distractor_gaussians) +
               "</td></tr>\n";
     }
@@ -399,14 +399,7 @@ ReportResult write_bench_report(const fs::path& out_dir, const std::vector<Bench
 
 ReportResult write_report(const fs::path& model_dir) {
   const ModelFolder model(model_dir);
-  json metrics, config;
-  for (auto [path, target] : {std::pair{model.metrics_path(), &metrics}, std::pair{model.config_path(), &config}}) {
-    try {
-      *target = json::parse(read_bytes(path));
-    } catch (const json::exception& e) {
-      throw std::invalid_argument(path.string() + " is not valid JSON: " + e.what());
-    }
-  }
+  const json metrics = model.read_metrics(), config = model.read_config_json();
   Plotter plotter(model_dir / ".report_tmp");
   std::string html = page_start("desplat training report: " + fs::absolute(model_dir).filename().string());
   std::string body = summary(metrics, config) + viewer(model_dir, config) + curves(metrics, plotter) +

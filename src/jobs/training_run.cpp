@@ -4,6 +4,7 @@
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/jobs/model_folder.hpp"
 #include "desplat/jobs/report.hpp"
+#include "jobs/text_format.hpp"
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -81,12 +82,6 @@ double median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
-}
-
-std::string fixed(double v, int decimals) {
-  char text[64];
-  std::snprintf(text, sizeof text, "%.*f", decimals, v);
-  return text;
 }
 
 json metrics_json(const std::vector<ViewMetrics>& m) {

@@ -506,6 +506,10 @@ std::string why_not_placed(const std::string& name, const std::vector<ModelInfo>
 
 std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, const std::vector<fs::path>& photos,
                                        const fs::path& database) {
+  std::vector<SkippedFile> missing;
+  for (const fs::path& p : photos)
+    if (!models[0].image_names.count(p.generic_string())) missing.push_back({p, ""});
+  if (missing.empty()) return missing;  // nothing to explain: the database is not read
   std::map<std::string, MatchEvidence> evidence;
   bool have_evidence = true;
   try {
@@ -513,10 +517,8 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, con
   } catch (const std::exception&) {
     have_evidence = false;
   }
-  std::vector<SkippedFile> missing;
-  for (const fs::path& p : photos)
-    if (!models[0].image_names.count(p.generic_string()))
-      missing.push_back({p, why_not_placed(p.generic_string(), models, have_evidence ? &evidence : nullptr)});
+  for (SkippedFile& m : missing)
+    m.reason = why_not_placed(m.path.generic_string(), models, have_evidence ? &evidence : nullptr);
   return missing;
 }
 

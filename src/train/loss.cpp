@@ -199,12 +199,15 @@ PhotometricLoss photometric_loss(std::span<const float> render, std::span<const 
   }
   const float l1_scale = n > 0 ? float((1.0 - ssim_lambda) / n) : 0.0f;
   double l1 = 0;
-  for (size_t i = 0; i < render.size(); ++i) {
-    const float k = keep.empty() ? 1.0f : keep[i / 3];
-    const float diff = k * (render[i] - target[i]);
+  // An ignored pixel's difference counts as 0: no L1, no gradient.
+  auto l1_term = [&](size_t i, float diff) {
     l1 += std::abs(diff);
     if (grad) d_render[i] = diff > 0 ? l1_scale : (diff < 0 ? -l1_scale : 0.0f);
-  }
+  };
+  if (keep.empty())
+    for (size_t i = 0; i < render.size(); ++i) l1_term(i, render[i] - target[i]);
+  else
+    for (size_t i = 0; i < render.size(); ++i) l1_term(i, keep[i / 3] * (render[i] - target[i]));
   l1 = n > 0 ? l1 / n : 0.0;
   // loss contains −λ·SSIM, so SSIM's gradient enters with scale −λ.
   const double s = ssim_and_gradient(render, target, width, height, -ssim_lambda, grad ? d_render.data() : nullptr,

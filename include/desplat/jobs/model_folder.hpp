@@ -66,6 +66,8 @@ class ModelFolder {
   // the recipe was recorded ("run" with split_rule / split_every_nth) still opens for the two
   // rules that need no files (every-nth, all-train) and is refused for the others.
   Config read_config() const;
+  // config.json as written (for showing it, e.g. in report.html); throws like read_config.
+  nlohmann::json read_config_json() const;
 
   bool has_checkpoint() const { return std::filesystem::exists(checkpoint_path()); }
   void write_checkpoint(const Trainer& trainer, const nlohmann::json& extra_metadata) const;  // atomically
