@@ -17,13 +17,17 @@ const char* kDescription =
     "\n"
     "Runs the colmap executable (3.8, CPU only) in three stages: feature_extractor (SIFT),\n"
     "a matcher, and mapper; shows one progress line per stage and keeps the model with the\n"
-    "most registered photos. Writes, under --out:\n"
+    "most registered photos. When fewer than 90 % of the photos are placed, it escalates, each\n"
+    "step only if the one before fell short: the mapper again with relaxed thresholds; the\n"
+    "photos left out registered into the model found; guided matching; twice the features.\n"
+    "Writes, under --out:\n"
     "  images/           symlink to --images (or a copy with --copy-images)\n"
     "  database.db       colmap's features and matches\n"
     "  sparse/0/         cameras.bin, images.bin, points3D.bin: the largest model\n"
     "                    (mapper's other models, if any, follow as sparse/1, ... by size)\n"
     "  colmap.log        everything colmap printed (follow it with tail -f)\n"
     "  image_list.txt    the photos handed to colmap\n"
+    "  attempts/         each escalation step's models (and database when it matched again)\n"
     "Then run desplat_train on --out.\n";
 
 const char* kFooter =
@@ -40,8 +44,10 @@ const char* kFooter =
     "\n"
     "Camera models (COLMAP's): SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV,\n"
     "OPENCV_FISHEYE, FULL_OPENCV, FOV, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE,\n"
-    "THIN_PRISM_FISHEYE. The default OPENCV (fx, fy, cx, cy, 2 radial and 2 tangential\n"
-    "distortion terms) suits phone and compact cameras; use OPENCV_FISHEYE for fisheye lenses.\n"
+    "THIN_PRISM_FISHEYE. By default OPENCV (fx, fy, cx, cy, 2 radial and 2 tangential\n"
+    "distortion terms) when the photos share one camera, and SIMPLE_RADIAL (f, cx, cy, k)\n"
+    "when each photo has its own (eight unknowns from one photo are too many); use\n"
+    "OPENCV_FISHEYE for fisheye lenses.\n"
     "\n"
     "Exit status: 0 on success; 1 when structure from motion fails, with a message that says\n"
     "what to do; other non-zero values for a bad command line.\n";
@@ -61,6 +67,7 @@ void print_summary(const sfm::SfmResult& r) {
               r.num_registered, r.num_photos, r.num_points, format_seconds(r.seconds).c_str(),
               format_seconds(r.extract_seconds).c_str(), sfm::matcher_name(r.matcher),
               format_seconds(r.match_seconds).c_str(), format_seconds(r.map_seconds).c_str());
+  std::printf("%s", sfm::describe_attempts(r).c_str());
   std::printf("mean track length %.2f images, mean reprojection error %.2f px\n", r.mean_track_length,
               r.mean_reprojection_error);
   std::printf("model:  %s\n", r.sparse_dir.c_str());
@@ -78,7 +85,7 @@ int main(int argc, char** argv) {
   CLI::App app{kDescription, "desplat_sfm"};
   sfm::SfmOptions o;
   std::string matcher = "auto";
-  int min_registered = 0;
+  std::string cameras = "auto";
   bool quiet = false;
 
   app.add_option("--images", o.images, "Folder of photos (read only; searched recursively)")
@@ -88,15 +95,23 @@ int main(int argc, char** argv) {
   app.add_option("--matcher", matcher, "Which photo pairs to match (see Matchers below)")
       ->check(CLI::IsMember({"auto", "exhaustive", "sequential", "spatial"}))
       ->default_str("auto");
-  app.add_option("--camera-model", o.camera_model, "Camera model to calibrate (see Camera models below)")
-      ->default_str("OPENCV");
-  app.add_flag("--single-camera", o.single_camera,
-               "All photos come from one camera with one zoom and size: share one calibration (recommended "
-               "then: far better constrained)");
-  app.add_option("--min-registered", min_registered,
-                 "Fail unless at least N photos end up in the model (default: max(3, half of the photos); "
-                 "a smaller model is still kept in sparse/0)")
-      ->check(CLI::PositiveNumber);
+  app.add_option("--camera-model", o.camera_model,
+                 "Camera model to calibrate (see Camera models below; default: OPENCV when the photos share "
+                 "one camera, SIMPLE_RADIAL when each has its own)");
+  app.add_option("--cameras", cameras,
+                 "auto: one shared calibration when all photos have the same size and EXIF camera and focal "
+                 "length, one per photo otherwise; single: always share one (one camera, one zoom); per-photo")
+      ->check(CLI::IsMember({"auto", "single", "per-photo"}))
+      ->default_str("auto");
+  app.add_option("--min-registered-share", o.min_registered_share,
+                 "Fail unless at least this share of the photos (and at least 3) end up in the model; a smaller "
+                 "model is still kept in sparse/0. Below 0.9 placed, the run warns")
+      ->check(CLI::Range(0.0, 1.0))
+      ->default_str("0.5");
+  app.add_flag("!--no-escalate", o.escalate,
+               "Run colmap's default pipeline only, even when fewer than 90 % of the photos are placed (by "
+               "default the escalation steps follow: relaxed mapper thresholds, registering the rest, guided "
+               "matching, more features)");
   app.add_option("--threads", o.num_threads, "Threads colmap may use (-1: all cores)")->default_str("-1");
   app.add_flag("--copy-images", o.copy_images, "Copy the photos into <out>/images instead of a symlink to --images");
   app.add_flag("--overwrite", o.overwrite, "Replace database.db and sparse/ left in --out by an earlier run");
@@ -111,7 +126,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   o.matcher = *sfm::matcher_from_name(matcher);
-  if (min_registered > 0) o.min_registered = min_registered;
+  o.cameras = *sfm::camera_sharing_from_name(cameras);
   if (stage_time_limit > 0) o.stage_time_limit_s = stage_time_limit;
   const bool tty = ::isatty(STDOUT_FILENO) != 0;
   if (!quiet) o.on_progress = sfm::terminal_progress(stdout, tty);

@@ -14,7 +14,10 @@
 #include <cstdio>
 #include <fstream>
 #include <numbers>
+#include <random>
 #include <sstream>
+
+#include <OpenImageIO/imageio.h>
 
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/image_io.hpp"
@@ -59,9 +62,12 @@ sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
 //   FAKE_COLMAP_KILL stage  that stage kills itself with SIGKILL
 //   FAKE_COLMAP_HANG stage  that stage sleeps for a minute
 //   FAKE_COLMAP_DB file     feature_extractor copies it to --database_path
-//   FAKE_COLMAP_MODELS dir  mapper copies dir/* into --output_path; otherwise mapper prints
-//                           colmap's "failed to create sparse model" and exits
+//   FAKE_COLMAP_MODELS dir  mapper copies dir/* into --output_path (the k-th mapper run copies
+//                           dir.k/* instead when that exists, k = 2, 3, ...); otherwise mapper
+//                           prints colmap's "failed to create sparse model" and exits
 //                           $FAKE_COLMAP_NO_MODEL_EXIT (default 1, as colmap 3.8 does)
+//   FAKE_COLMAP_REGISTERED dir  image_registrator copies dir/* into --output_path; otherwise it
+//                           copies --input_path (registers nothing). bundle_adjuster does nothing.
 const char* kFakeColmap = R"SH(#!/bin/sh
 stage="$1"
 [ -n "$FAKE_COLMAP_ARGS" ] && echo "$*" >> "$FAKE_COLMAP_ARGS"
@@ -69,6 +75,7 @@ out=""
 prev=""
 for a in "$@"; do
   [ "$prev" = "--output_path" ] && out="$a"
+  [ "$prev" = "--input_path" ] && in="$a"
   [ "$prev" = "--database_path" ] && db="$a"
   prev="$a"
 done
@@ -81,8 +88,12 @@ if [ "$stage" = feature_extractor ] && [ -n "$FAKE_COLMAP_DB" ]; then cp "$FAKE_
 if [ "$stage" = "$FAKE_COLMAP_FAIL" ]; then echo "fake colmap: disk on fire" >&2; exit 3; fi
 if [ "$stage" = "$FAKE_COLMAP_KILL" ]; then kill -9 $$; fi
 if [ "$stage" = "$FAKE_COLMAP_HANG" ]; then exec sleep 60; fi
+if [ "$stage" = image_registrator ]; then cp -R "${FAKE_COLMAP_REGISTERED:-$in}"/. "$out"/; exit 0; fi
 if [ "$stage" = mapper ]; then
-  if [ -n "$FAKE_COLMAP_MODELS" ]; then cp -R "$FAKE_COLMAP_MODELS"/. "$out"/; exit 0; fi
+  models="$FAKE_COLMAP_MODELS"
+  k=$(grep -c '^mapper' "$FAKE_COLMAP_ARGS")
+  [ -d "$models.$k" ] && models="$models.$k"
+  if [ -n "$models" ] && [ -d "$models" ]; then cp -R "$models"/. "$out"/; exit 0; fi
   echo "ERROR: failed to create sparse model" >&2
   exit "${FAKE_COLMAP_NO_MODEL_EXIT:-1}"
 fi
@@ -133,6 +144,7 @@ class FakeColmap : public ::testing::Test {
     options_.images = photos_;
     options_.out = tmp_.path() / "out";
     options_.on_progress = [this](const sfm::SfmProgress& p) { progress_.push_back(p); };
+    options_.escalate = false;  // the escalation tests turn it on
   }
   // Models the fake mapper will "produce": one sub-folder per model, with these image counts.
   void give_models(std::initializer_list<int> sizes) {
@@ -250,7 +262,7 @@ TEST(SfmReal, SevenFoxPhotosMatchTheReferenceModelUpToASimilarity) {
   o.images = photos;
   o.out = tmp.path() / "out";
   o.matcher = sfm::Matcher::Exhaustive;
-  o.single_camera = true;  // as the reference was made
+  o.cameras = sfm::CameraSharing::Single;  // as the reference was made
   std::vector<sfm::SfmProgress> progress;
   o.on_progress = [&](const sfm::SfmProgress& p) { progress.push_back(p); };
   const sfm::SfmResult r = sfm::run_sfm(o);
@@ -330,12 +342,51 @@ TEST(SfmReal, SevenFoxPhotosMatchTheReferenceModelUpToASimilarity) {
   EXPECT_LT(worst_deg, 2.0);
 }
 
+// The escalation steps on the real colmap: 7 fox photos that register and 2 of noise that never
+// can (7 of 9 is under 90 %), so every step runs. Each must be accepted by colmap 3.8 (an
+// option it does not know stops the ladder, which the test would see) and none may lose the
+// photos the first run placed.
+TEST(SfmReal, EveryEscalationStepRunsOnColmapAndKeepsThePlacedPhotos) {
+  ASSERT_TRUE(sfm::find_executable("colmap")) << "colmap is not on PATH: run scripts/install_deps.sh";
+  TempDir tmp;
+  const fs::path photos = tmp.path() / "photos";
+  fs::create_directories(photos);
+  for (const char* name : {"0001.jpg", "0002.jpg", "0003.jpg", "0004.jpg", "0006.jpg", "0007.jpg", "0008.jpg"})
+    desplat::write_image(photos / name, half_size(desplat::read_image_rgb(kFox / "images" / name)));
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (const char* name : {"noise_a.png", "noise_b.png"}) {
+    desplat::FloatImage noise{270, 480, 3, std::vector<float>(270 * 480 * 3)};
+    for (float& v : noise.pixels) v = u(rng);
+    desplat::write_image(photos / name, noise);
+  }
+  sfm::SfmOptions o;
+  o.images = photos;
+  o.out = tmp.path() / "out";
+  const sfm::SfmResult r = sfm::run_sfm(o);
+  std::string steps;
+  for (const auto& a : r.attempts) {
+    steps += a.step + " " + std::to_string(a.registered) + "; ";
+    EXPECT_EQ(a.settings.find("stopped"), std::string::npos) << a.step << ": " << a.settings;
+  }
+  std::printf("[   info   ] %s%.1f s\n", steps.c_str(), r.seconds);
+  ASSERT_EQ(r.attempts.size(), 7u) << steps;
+  EXPECT_EQ(r.attempts[6].step, "register the rest");
+  EXPECT_TRUE(r.cameras.single);  // one size, no EXIF
+  for (const auto& a : r.attempts) EXPECT_LE(a.registered, 7) << a.step;  // noise is never placed
+  EXPECT_GE(r.num_registered, r.attempts[0].registered);
+  EXPECT_GE(r.num_registered, 5);
+  ASSERT_EQ(r.unregistered.size(), size_t(9 - r.num_registered));
+  EXPECT_CONTAINS(r.warning, "could not be placed even after escalation");
+  EXPECT_EQ(int(colmap::read_model(o.out / "sparse" / "0").images.size()), r.num_registered);
+}
+
 // ---- Failures with a fake colmap ---------------------------------------------------------
 
 TEST_F(FakeColmap, RunsTheThreeStagesWithCpuOptionsAndReportsProgress) {
   give_models({5});
   options_.camera_model = "PINHOLE";
-  options_.single_camera = true;
+  options_.cameras = sfm::CameraSharing::Single;
   const sfm::SfmResult r = sfm::run_sfm(options_);
   EXPECT_EQ(r.num_registered, 5);
   EXPECT_EQ(r.num_photos, 6);
@@ -427,26 +478,30 @@ TEST_F(FakeColmap, ReportsNoModel) {
 }
 
 TEST_F(FakeColmap, TooFewRegisteredKeepsThePartialModel) {
-  give_models({2});  // of 6 photos; the default minimum is max(3, 6/2) = 3
-  const auto e = expect_error(options_, SfmErrorKind::TooFewRegistered);
+  give_models({2});  // of 6 photos; the default minimum is max(3, ⌈0.5·6⌉) = 3
+  auto e = expect_error(options_, SfmErrorKind::TooFewRegistered);
   EXPECT_CONTAINS(e.what(), "only 2 of 6 photos could be placed (at least 3 needed); take more overlapping photos");
-  EXPECT_CONTAINS(e.what(), "--min-registered 2");
+  EXPECT_EQ(std::string(e.what()).find("--min-registered-share"), std::string::npos);  // 2 photos: never enough
   // The model holds p0 and p1: the message names the four photos it lost.
   EXPECT_CONTAINS(e.what(), "4 of 6 photos could not be placed by structure from motion (not in the model, so not "
                             "trained on):\n  p2.png: ");
   EXPECT_CONTAINS(e.what(), "\n  p5.png: ");
   EXPECT_EQ(colmap::read_model(options_.out / "sparse" / "0").images.size(), 2u);
-
-  options_.overwrite = true;  // what the message suggests
-  options_.min_registered = 2;
-  EXPECT_EQ(sfm::run_sfm(options_).num_registered, 2);
 }
 
-TEST_F(FakeColmap, ExplicitMinRegisteredIsEnforced) {
-  give_models({5});
-  options_.min_registered = 6;
-  const auto e = expect_error(options_, SfmErrorKind::TooFewRegistered);
-  EXPECT_CONTAINS(e.what(), "only 5 of 6 photos could be placed (at least 6 needed)");
+TEST_F(FakeColmap, AShareTheUserSetsIsEnforcedAndThePartialModelCanBeAccepted) {
+  give_models({3});
+  options_.min_registered_share = 0.75;  // ⌈4.5⌉ = 5 of 6
+  auto e = expect_error(options_, SfmErrorKind::TooFewRegistered);
+  EXPECT_CONTAINS(e.what(), "only 3 of 6 photos could be placed (at least 5 needed)");
+  EXPECT_CONTAINS(e.what(), "--overwrite --min-registered-share 0.50");
+  options_.overwrite = true;  // what the message suggests
+  options_.min_registered_share = 0.5;
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+  EXPECT_EQ(r.num_registered, 3);
+  // Above the share but under 90 %: it succeeds with a warning that says how many were lost.
+  EXPECT_EQ(r.warning, "3 of 6 photos could not be placed; they are not trained on (see the list below)");
+  EXPECT_CONTAINS(sfm::describe_attempts(r), "warning: 3 of 6 photos could not be placed");
 }
 
 TEST_F(FakeColmap, ColmapNotOnPath) {
@@ -522,17 +577,193 @@ void write_colmap_database(const fs::path& path, const std::vector<std::pair<std
       "CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT UNIQUE, camera_id INTEGER);"
       "CREATE TABLE keypoints (image_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);"
       "CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB, "
-      "config INTEGER);";
+      "config INTEGER);"
+      "CREATE TABLE matches (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);";
   for (size_t i = 0; i < features.size(); ++i)
     sql += "INSERT INTO images VALUES (" + std::to_string(i + 1) + ", '" + features[i].first + "', 1);" +
            "INSERT INTO keypoints VALUES (" + std::to_string(i + 1) + ", " + std::to_string(features[i].second) +
            ", 6, NULL);";
   for (const auto& [a, b, inliers] : verified_pairs)
     sql += "INSERT INTO two_view_geometries VALUES (" + std::to_string(int64_t(a) * 2147483647 + b) + ", " +
-           std::to_string(inliers) + ", 2, NULL, 2);";
+           std::to_string(inliers) + ", 2, NULL, 2);" + "INSERT INTO matches VALUES (" +
+           std::to_string(int64_t(a) * 2147483647 + b) + ", " + std::to_string(inliers) + ", 2, NULL);";
   char* error = nullptr;
   ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &error), SQLITE_OK) << (error ? error : "");
   sqlite3_close(db);
+}
+
+// A 32×24 JPEG that records these EXIF fields (as a camera would).
+void write_jpeg_with_exif(const fs::path& path, const char* make, const char* model, float focal_mm) {
+  OIIO::ImageSpec spec(32, 24, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("Make", make);
+  spec.attribute("Model", model);
+  spec.attribute("Exif:FocalLength", focal_mm);
+  const std::vector<unsigned char> pixels(32 * 24 * 3, 128);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+TEST(PhotoScan, ReadsEachPhotosSizeAndExifCamera) {
+  TempDir tmp;
+  write_jpeg_with_exif(tmp.path() / "a.jpg", "Apple", "iPhone 12", 4.2f);
+  write_jpeg_with_exif(tmp.path() / "b.jpg", "Apple", "iPhone 12", 6.0f);
+  const sfm::PhotoScan scan = sfm::scan_photos(tmp.path());
+  ASSERT_EQ(scan.cameras.size(), 2u);
+  EXPECT_EQ(scan.cameras[0].width, 32);
+  EXPECT_EQ(scan.cameras[0].height, 24);
+  EXPECT_EQ(scan.cameras[0].make, "Apple");
+  EXPECT_EQ(scan.cameras[0].model, "iPhone 12");
+  EXPECT_FLOAT_EQ(scan.cameras[0].focal_mm, 4.2f);
+  EXPECT_FLOAT_EQ(scan.cameras[1].focal_mm, 6.0f);  // zoomed: so not one shared camera
+  EXPECT_FALSE(sfm::choose_cameras(sfm::CameraSharing::Auto, scan.cameras).single);
+}
+
+int count_rows(const fs::path& database, const char* table) {
+  sqlite3* db = nullptr;
+  EXPECT_EQ(sqlite3_open(database.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* stmt = nullptr;
+  const std::string sql = std::string("SELECT COUNT(*) FROM ") + table;
+  EXPECT_EQ(sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr), SQLITE_OK);
+  const int n = sqlite3_step(stmt) == SQLITE_ROW ? sqlite3_column_int(stmt, 0) : -1;
+  sqlite3_finalize(stmt);
+  sqlite3_close(db);
+  return n;
+}
+
+// The lines of the fake's argument log that start with `stage`.
+std::vector<std::string> calls_of(const fs::path& args_log, const std::string& stage) {
+  std::vector<std::string> lines;
+  std::istringstream in(slurp(args_log));
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(stage + " ", 0) == 0) lines.push_back(line);
+  return lines;
+}
+
+TEST_F(FakeColmap, EscalatesStepByStepUntilNinetyPercentArePlacedAndKeepsTheLargestModel) {
+  write_tiny_photos(photos_, 10);
+  options_.escalate = true;
+  const fs::path models = tmp_.path() / "models";
+  colmap::write_model_binary(fake_model(6), models / "0");    // colmap's defaults: 6 of 10
+  colmap::write_model_binary(fake_model(8), models.string() + ".2" + "/0");  // relaxed mapper: 8
+  colmap::write_model_binary(fake_model(10), tmp_.path() / "registered");    // registering the rest: 10
+  models_env_.emplace("FAKE_COLMAP_MODELS", models.string());
+  ScopedEnv registered("FAKE_COLMAP_REGISTERED", (tmp_.path() / "registered").string());
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+
+  ASSERT_EQ(r.attempts.size(), 3u);  // 10 of 10 reaches 90 %: no guided matching, no more features
+  EXPECT_EQ(r.attempts[0].step, "colmap defaults");
+  EXPECT_EQ(r.attempts[0].registered, 6);
+  EXPECT_EQ(r.attempts[1].step, "relaxed mapper");
+  EXPECT_EQ(r.attempts[1].registered, 8);
+  EXPECT_EQ(r.attempts[2].step, "register the rest");
+  EXPECT_EQ(r.attempts[2].registered, 10);
+  EXPECT_EQ(r.num_registered, 10);
+  EXPECT_TRUE(r.warning.empty());
+  const fs::path out = options_.out;
+  const auto mappers = calls_of(args_log_, "mapper");
+  ASSERT_EQ(mappers.size(), 2u);
+  EXPECT_EQ(mappers[0].find("init_min_num_inliers"), std::string::npos);
+  EXPECT_CONTAINS(mappers[1], "--output_path " + (out / "attempts/1-relaxed-mapper/sparse").string());
+  EXPECT_CONTAINS(mappers[1], "--Mapper.init_min_num_inliers 30 --Mapper.init_min_tri_angle 4 "
+                              "--Mapper.abs_pose_min_num_inliers 15");
+  const auto registrations = calls_of(args_log_, "image_registrator");
+  ASSERT_EQ(registrations.size(), 1u);  // into the best model so far, the relaxed mapper's
+  EXPECT_CONTAINS(registrations[0], "--input_path " + (out / "attempts/1-relaxed-mapper/sparse/0").string());
+  EXPECT_CONTAINS(registrations[0], "--database_path " + (out / "database.db").string());
+  EXPECT_EQ(calls_of(args_log_, "bundle_adjuster").size(), 1u);
+  EXPECT_EQ(slurp(args_log_).find("guided_matching"), std::string::npos);
+  // The winner is in sparse/0; what it replaced is kept, nothing deleted.
+  EXPECT_EQ(colmap::read_model(out / "sparse/0").images.size(), 10u);
+  EXPECT_EQ(colmap::read_model(out / "attempts/0-colmap-defaults/sparse/0").images.size(), 6u);
+  EXPECT_EQ(colmap::read_model(out / "attempts/1-relaxed-mapper/sparse/0").images.size(), 8u);
+  EXPECT_CONTAINS(slurp(r.log), "step 'relaxed mapper' (--Mapper.init_min_num_inliers 30");
+  EXPECT_CONTAINS(sfm::describe_attempts(r), "register the rest: 10 of 10 photos");
+}
+
+TEST_F(FakeColmap, WhenCheapStepsFallShortItMatchesAgainOnACopyOfTheFeaturesThenExtractsMore) {
+  write_tiny_photos(photos_, 10);
+  options_.escalate = true;
+  const fs::path models = tmp_.path() / "models";  // no model from colmap's defaults at all
+  colmap::write_model_binary(fake_model(5), models.string() + ".2/0");  // relaxed mapper
+  colmap::write_model_binary(fake_model(7), models.string() + ".3/0");  // guided matching
+  colmap::write_model_binary(fake_model(6), models.string() + ".4/0");  // more features
+  models_env_.emplace("FAKE_COLMAP_MODELS", models.string());
+  const fs::path db = tmp_.path() / "colmap.db";
+  write_colmap_database(db, {{"p0.png", 900}, {"p1.png", 900}}, {{1, 2, 300}});
+  ScopedEnv db_env("FAKE_COLMAP_DB", db.string());
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+
+  std::vector<std::string> steps;
+  for (const auto& a : r.attempts) steps.push_back(a.step + " " + std::to_string(a.registered));
+  EXPECT_EQ(steps, (std::vector<std::string>{"colmap defaults 0", "relaxed mapper 5", "register the rest 5",
+                                             "guided matching 7", "register the rest 7", "more features 6",
+                                             "register the rest 7"}));
+  EXPECT_EQ(r.num_registered, 7);
+  EXPECT_EQ(r.warning, "3 of 10 photos could not be placed even after escalation; they are not trained on (see the "
+                       "list below)");
+  const fs::path out = options_.out, guided = out / "attempts/3-guided-matching";
+  // Guided matching ran on a copy of the first features with the matches removed (colmap's
+  // matcher skips pairs it has); the first database keeps its matches.
+  const auto matchers = calls_of(args_log_, "exhaustive_matcher");
+  ASSERT_EQ(matchers.size(), 3u);
+  EXPECT_CONTAINS(matchers[1], "--database_path " + (guided / "database.db").string());
+  EXPECT_CONTAINS(matchers[1], "--SiftMatching.guided_matching 1");
+  const auto extractors = calls_of(args_log_, "feature_extractor");
+  ASSERT_EQ(extractors.size(), 2u);
+  EXPECT_CONTAINS(extractors[1], "--database_path " + (out / "attempts/5-more-features/database.db").string());
+  EXPECT_CONTAINS(extractors[1], "--SiftExtraction.max_num_features 16000 --SiftExtraction.domain_size_pooling 1");
+  // The guided step's model won: its model and its database moved into place.
+  EXPECT_EQ(colmap::read_model(out / "sparse/0").images.size(), 7u);
+  EXPECT_EQ(count_rows(out / "database.db", "matches"), 0);
+  EXPECT_EQ(count_rows(out / "database.db", "keypoints"), 2);
+  EXPECT_EQ(count_rows(out / "attempts/0-colmap-defaults/database.db", "matches"), 1);
+  EXPECT_FALSE(fs::exists(guided / "database.db"));
+}
+
+TEST_F(FakeColmap, AnEscalationStepThatFailsEndsTheLadderAndKeepsTheModelFound) {
+  write_tiny_photos(photos_, 10);
+  options_.escalate = true;
+  give_models({6});
+  ScopedEnv fail("FAKE_COLMAP_FAIL", "image_registrator");  // the second step breaks
+  const sfm::SfmResult r = sfm::run_sfm(options_);
+  ASSERT_EQ(r.attempts.size(), 3u);
+  EXPECT_EQ(r.attempts[2].step, "register the rest");
+  EXPECT_CONTAINS(r.attempts[2].settings, "stopped: colmap image_registrator failed with exit code 3");
+  EXPECT_EQ(calls_of(args_log_, "exhaustive_matcher").size(), 1u);  // no step after the failed one
+  EXPECT_EQ(r.num_registered, 6);
+  EXPECT_EQ(colmap::read_model(options_.out / "sparse/0").images.size(), 6u);
+}
+
+TEST_F(FakeColmap, CamerasAndModelFollowThePhotosUnlessTheUserChooses) {
+  give_models({6});
+  sfm::SfmResult r = sfm::run_sfm(options_);  // six 16×16 photos without EXIF: one shared camera
+  EXPECT_TRUE(r.cameras.single);
+  EXPECT_CONTAINS(slurp(args_log_), "--ImageReader.camera_model OPENCV --ImageReader.single_camera 1");
+  EXPECT_CONTAINS(r.attempts[0].settings, "one shared camera, OPENCV");
+
+  desplat::write_image(photos_ / photo_name(5), desplat::FloatImage{24, 16, 3, std::vector<float>(24 * 16 * 3, 0.5f)});
+  options_.overwrite = true;
+  fs::remove(args_log_);
+  r = sfm::run_sfm(options_);  // two sizes: one camera per photo, with colmap's own model
+  EXPECT_FALSE(r.cameras.single);
+  EXPECT_CONTAINS(slurp(args_log_), "--ImageReader.camera_model SIMPLE_RADIAL --ImageReader.single_camera 0");
+
+  options_.cameras = sfm::CameraSharing::Single;
+  options_.camera_model = "OPENCV_FISHEYE";
+  fs::remove(args_log_);
+  r = sfm::run_sfm(options_);
+  EXPECT_CONTAINS(slurp(args_log_), "--ImageReader.camera_model OPENCV_FISHEYE --ImageReader.single_camera 1");
+}
+
+TEST_F(FakeColmap, WithoutEscalationOnlyColmapsDefaultsRun) {
+  give_models({6});
+  write_tiny_photos(photos_, 10);
+  const sfm::SfmResult r = sfm::run_sfm(options_);  // escalate = false (the fixture's)
+  ASSERT_EQ(r.attempts.size(), 1u);
+  EXPECT_EQ(calls_of(args_log_, "mapper").size(), 1u);
+  EXPECT_EQ(r.warning, "4 of 10 photos could not be placed; they are not trained on (see the list below)");
 }
 
 TEST_F(FakeColmap, ResultNamesSkippedFilesAndEveryUnplacedPhotoWithItsReason) {
@@ -551,7 +782,7 @@ TEST_F(FakeColmap, ResultNamesSkippedFilesAndEveryUnplacedPhotoWithItsReason) {
                              {"p5.png", 900}, {"p6.png", 2000}},
                         {{1, 2, 300}, {1, 7, 50}, {2, 7, 20}, {1, 3, 200}});
   ScopedEnv db_env("FAKE_COLMAP_DB", db.string());
-  options_.min_registered = 3;
+  options_.min_registered_share = 0.4;  // ⌈2.8⌉ = 3 of 7
   const sfm::SfmResult r = sfm::run_sfm(options_);
   EXPECT_EQ(r.num_photos, 7);
   ASSERT_EQ(r.skipped.size(), 1u);
@@ -623,8 +854,10 @@ TEST_F(FakeColmap, BadOptions) {
   EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadOptions).what(),
                   "unknown camera model 'opencv'; use one of SIMPLE_PINHOLE");
   options_.camera_model = "OPENCV";
-  options_.min_registered = 0;
-  EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadOptions).what(), "--min-registered must be at least 1");
+  for (double share : {0.0, -0.5, 1.5, std::nan("")}) {
+    options_.min_registered_share = share;
+    EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadOptions).what(), "--min-registered-share must be in (0, 1]");
+  }
 }
 
 TEST_F(FakeColmap, SequentialAndSpatialMatchersAreRun) {

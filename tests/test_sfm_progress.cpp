@@ -17,10 +17,39 @@ TEST(SfmHelpers, MatcherChoiceAndDefaults) {
   EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Spatial, 5), sfm::Matcher::Spatial);
   EXPECT_EQ(sfm::matcher_from_name("sequential"), sfm::Matcher::Sequential);
   EXPECT_EQ(sfm::matcher_from_name("Sequential"), std::nullopt);
-  EXPECT_EQ(sfm::default_min_registered(1), 3);
-  EXPECT_EQ(sfm::default_min_registered(6), 3);
-  EXPECT_EQ(sfm::default_min_registered(7), 4);
-  EXPECT_EQ(sfm::default_min_registered(50), 25);
+  EXPECT_EQ(sfm::required_registered(0.5, 1), 3);  // never fewer than 3
+  EXPECT_EQ(sfm::required_registered(0.5, 6), 3);
+  EXPECT_EQ(sfm::required_registered(0.5, 7), 4);  // ⌈3.5⌉
+  EXPECT_EQ(sfm::required_registered(0.5, 50), 25);
+  EXPECT_EQ(sfm::required_registered(0.9, 10), 9);  // 0.9·10 in floating point is 9, not 9.000…1
+  EXPECT_EQ(sfm::required_registered(1.0, 44), 44);
+}
+
+TEST(SfmHelpers, PhotosThatAgreeOnSizeAndExifShareOneCamera) {
+  using sfm::CameraSharing;
+  const sfm::PhotoCamera phone{1080, 1440, "Apple", "iPhone 12", 4.2f};
+  const sfm::PhotoCamera plain{540, 960, "", "", 0.0f};  // video frames: no EXIF
+  auto choice = sfm::choose_cameras(CameraSharing::Auto, {phone, phone, phone});
+  EXPECT_TRUE(choice.single);
+  EXPECT_EQ(choice.reason, "one shared camera: all 3 photos are 1080x1440 with the same camera make, model and "
+                           "focal length in EXIF (or none recorded)");
+  EXPECT_TRUE(sfm::choose_cameras(CameraSharing::Auto, {plain, plain}).single);
+
+  sfm::PhotoCamera zoomed = phone;
+  zoomed.focal_mm = 6.0f;
+  choice = sfm::choose_cameras(CameraSharing::Auto, {phone, zoomed, phone});
+  EXPECT_FALSE(choice.single);
+  EXPECT_EQ(choice.reason, "one camera per photo: the 3 photos come in one size but 2 EXIF camera/zoom settings");
+  sfm::PhotoCamera smaller = plain;
+  smaller.width = 270, smaller.height = 480;
+  choice = sfm::choose_cameras(CameraSharing::Auto, {plain, smaller, plain});
+  EXPECT_FALSE(choice.single);
+  EXPECT_EQ(choice.reason, "one camera per photo: the 3 photos come in 2 image sizes");
+  // What the user asks for wins.
+  EXPECT_TRUE(sfm::choose_cameras(CameraSharing::Single, {plain, smaller}).single);
+  EXPECT_FALSE(sfm::choose_cameras(CameraSharing::PerPhoto, {plain, plain}).single);
+  EXPECT_EQ(sfm::camera_sharing_from_name("per-photo"), CameraSharing::PerPhoto);
+  EXPECT_EQ(sfm::camera_sharing_from_name("single-camera"), std::nullopt);
 }
 
 TEST(SfmHelpers, TerminalProgressPrintsPlainLinesWhenNotATty) {

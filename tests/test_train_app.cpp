@@ -335,6 +335,47 @@ TEST_F(TrainApp, NoTestViewsIsSaidNotScoredAsZero) {
   EXPECT_EQ(metrics["count"], 0);
 }
 
+// desplat_train --images runs structure from motion first; here a stand-in `colmap` on PATH
+// "finds" the scene's own model, which holds 16 of the 17 photos. What SfM lost, and every
+// step it took, must reach the log, metrics.json and report.html.
+TEST_F(TrainApp, PhotosStructureFromMotionLostAreNamedInLogMetricsAndReport) {
+  const fs::path photos = root_ / "photos", bin = root_ / "fake_colmap_bin", out = root_ / "from_photos";
+  fs::create_directories(photos);
+  for (const auto& e : fs::directory_iterator(root_ / "scene" / "images")) fs::copy_file(e.path(), photos / e.path().filename());
+  fs::copy_file(root_ / "scene" / "images" / "view_1.png", photos / "extra.png");  // a photo no model holds
+  write_file_atomically(photos / "notes.txt", "not a photo");
+  fs::create_directories(bin);
+  const std::string fake = "#!/bin/sh\nprev=\"\"\nfor a in \"$@\"; do [ \"$prev\" = --output_path ] && out=\"$a\"; "
+                           "prev=\"$a\"; done\n[ \"$1\" = mapper ] && mkdir -p \"$out/0\" && cp " +
+                           (root_ / "scene" / "sparse" / "0").string() + "/* \"$out/0/\"\nexit 0\n";
+  write_file_atomically(bin / "colmap", fake);
+  fs::permissions(bin / "colmap", fs::perms::owner_all);
+  const Outcome r = run("PATH=" + bin.string() + ":$PATH " + std::string(DESPLAT_TRAIN_BIN) + " --images " +
+                        photos.string() + " --out " + out.string() + " --iterations 10 --threads 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("colmap defaults:   16 of 17 photos"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("extra.png: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("notes.txt: not a photo"), std::string::npos) << r.output;
+  nlohmann::json metrics;
+  std::ifstream(out / "metrics.json") >> metrics;
+  const nlohmann::json& sfm = metrics["sfm"];
+  EXPECT_EQ(sfm["registered"], 16);
+  EXPECT_EQ(sfm["photos"], 17);
+  ASSERT_EQ(sfm["unregistered_photos"].size(), 1u);
+  EXPECT_EQ(sfm["unregistered_photos"][0]["photo"], "extra.png");
+  ASSERT_EQ(sfm["attempts"].size(), 1u);  // 16 of 17 is above 90 %: no escalation
+  EXPECT_EQ(sfm["attempts"][0]["step"], "colmap defaults");
+  EXPECT_EQ(sfm["warning"], "");
+  const std::string report = desplat::testing::slurp(out / "report.html");
+  EXPECT_NE(report.find("<h2>Structure from motion</h2>"), std::string::npos);
+  // The stand-in wrote no database, so the reason is that it could not be read.
+  EXPECT_EQ(sfm["unregistered_photos"][0]["reason"], "not in the model (colmap's database could not be read)");
+  EXPECT_NE(report.find("<tr><th>extra.png</th><td>not in the model (colmap&#39;s database could not be read)"),
+            std::string::npos);
+  EXPECT_NE(report.find("<tr><th>notes.txt</th><td>not a photo"), std::string::npos);
+  EXPECT_NE(report.find("<td>colmap defaults</td><td>16</td>"), std::string::npos);
+}
+
 TEST_F(TrainApp, BadInputGivesOneClearError) {
   Outcome r = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root_ / "nope").string() + " --out " +
               (root_ / "o1").string());

@@ -212,6 +212,36 @@ std::string decomposition(const json& m, const fs::path& dir) {
   return s;
 }
 
+// What structure from motion did, when this run started from photos (--images): how many were
+// placed, each step tried, and every photo or file that was left out with its reason.
+std::string structure_from_motion(const json& m) {
+  const json& sfm = m.contains("sfm") ? m["sfm"] : json();
+  if (!sfm.is_object()) return "";
+  std::string s = "<h2>Structure from motion</h2>\n<table>\n";
+  s += row("photos placed", std::to_string(sfm.value("registered", 0)) + " of " + std::to_string(sfm.value("photos", 0)) +
+                                ", " + std::to_string(sfm.value("points", 0)) + " points, mean track length " +
+                                shown(number(sfm, "mean_track_length"), 2) + ", mean reprojection error " +
+                                shown(number(sfm, "mean_reprojection_error_px"), 2) + " px");
+  s += row("cameras", sfm.value("cameras", std::string("?")));
+  if (!sfm.value("warning", std::string()).empty()) s += row("warning", sfm["warning"].get<std::string>());
+  s += "</table>\n<table><tr><th>step</th><th>photos placed</th><th>points</th><th>time</th><th>settings</th></tr>\n";
+  for (const json& a : sfm.value("attempts", json::array()))
+    s += "<tr><td>" + escape_html(a.value("step", "")) + "</td><td>" + std::to_string(a.value("registered", 0)) +
+         "</td><td>" + std::to_string(a.value("points", 0)) + "</td><td>" + duration(number(a, "seconds")) +
+         "</td><td>" + escape_html(a.value("settings", "")) + "</td></tr>\n";
+  s += "</table>\n";
+  const auto list = [&](const char* key, const char* name_key, const std::string& heading) {
+    const json items = sfm.value(key, json::array());
+    if (items.empty()) return;
+    s += "<p>" + escape_html(heading) + "</p>\n<table>\n";
+    for (const json& f : items) s += row(f.value(name_key, ""), f.value("reason", ""));
+    s += "</table>\n";
+  };
+  list("unregistered_photos", "photo", "Photos structure from motion could not place (not trained on):");
+  list("skipped_files", "file", "Files in the images folder that were not used:");
+  return s;
+}
+
 std::string curves(const json& m, Plotter& plotter) {
   Series loss{"training loss", {}}, train_psnr{"training PSNR (composite)", {}}, test_psnr{"test PSNR", {}};
   Series statics{"static", {}}, distractors{"distractor", {}}, psnr_time{"training PSNR", {}},
@@ -402,7 +432,8 @@ ReportResult write_report(const fs::path& model_dir) {
   const json metrics = model.read_metrics(), config = model.read_config_json();
   Plotter plotter(model_dir / ".report_tmp");
   std::string html = page_start("desplat training report: " + fs::absolute(model_dir).filename().string());
-  std::string body = summary(metrics, config) + viewer(model_dir, config) + curves(metrics, plotter) +
+  std::string body = summary(metrics, config) + structure_from_motion(metrics) + viewer(model_dir, config) +
+                     curves(metrics, plotter) +
                      step_breakdown(metrics, plotter) + test_views(metrics, model_dir) +
                      decomposition(metrics, model_dir);
   html += note_paragraph(plotter) + body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";

@@ -141,7 +141,10 @@ json model_cost(const Trainer& t) {
 
 // What SfM made of the user's photos, including every file and photo it left out.
 json sfm_json(const sfm::SfmResult& r) {
-  json skipped = json::array(), unregistered = json::array();
+  json skipped = json::array(), unregistered = json::array(), attempts = json::array();
+  for (const sfm::SfmAttempt& a : r.attempts)
+    attempts.push_back({{"step", a.step}, {"settings", a.settings}, {"registered", a.registered},
+                        {"points", a.points}, {"seconds", a.seconds}});
   for (const sfm::SkippedFile& f : r.skipped) skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
   for (const sfm::SkippedFile& f : r.unregistered)
     unregistered.push_back({{"photo", f.path.generic_string()}, {"reason", f.reason}});
@@ -152,6 +155,9 @@ json sfm_json(const sfm::SfmResult& r) {
           {"mean_reprojection_error_px", r.mean_reprojection_error},
           {"models", r.num_models},
           {"seconds", r.seconds},
+          {"cameras", r.cameras.reason},
+          {"attempts", attempts},
+          {"warning", r.warning},
           {"skipped_files", skipped},
           {"unregistered_photos", unregistered}};
 }
@@ -250,7 +256,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     std::printf("SfM: %d of %d photos registered, %d points, mean track length %.2f, mean reprojection error %.2f px "
                 "(%.0f s)\n",
                 r.num_registered, r.num_photos, r.num_points, r.mean_track_length, r.mean_reprojection_error, r.seconds);
-    std::printf("%s", sfm::describe_lost_photos(r).c_str());
+    std::printf("%s%s", sfm::describe_attempts(r).c_str(), sfm::describe_lost_photos(r).c_str());
     sfm_summary = sfm_json(r);
     data_dir = sfm_options.out;
   }

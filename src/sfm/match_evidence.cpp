@@ -1,4 +1,4 @@
-// Reads colmap 3.8's database.db (SQLite): images, keypoints, two_view_geometries.
+// Reads colmap 3.8's database.db (SQLite): images, keypoints, two_view_geometries; clears matches.
 #include "sfm/match_evidence.hpp"
 
 #include <sqlite3.h>
@@ -18,16 +18,20 @@ struct Closer {
   void operator()(sqlite3_stmt* s) const { sqlite3_finalize(s); }
 };
 
-}  // namespace
-
-std::map<std::string, MatchEvidence> read_match_evidence(const std::filesystem::path& database) {
+std::unique_ptr<sqlite3, Closer> open_database(const std::filesystem::path& database, int flags) {
   sqlite3* raw = nullptr;
-  if (sqlite3_open_v2(database.c_str(), &raw, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+  if (sqlite3_open_v2(database.c_str(), &raw, flags, nullptr) != SQLITE_OK) {
     const std::string why = raw ? sqlite3_errmsg(raw) : "out of memory";
     sqlite3_close(raw);
     throw std::runtime_error(database.string() + ": cannot open colmap's database: " + why);
   }
-  const std::unique_ptr<sqlite3, Closer> db(raw);
+  return std::unique_ptr<sqlite3, Closer>(raw);
+}
+
+}  // namespace
+
+std::map<std::string, MatchEvidence> read_match_evidence(const std::filesystem::path& database) {
+  const auto db = open_database(database, SQLITE_OPEN_READONLY);
   auto query = [&](const char* sql, auto&& on_row) {
     sqlite3_stmt* stmt = nullptr;
     if (sqlite3_prepare_v2(db.get(), sql, -1, &stmt, nullptr) != SQLITE_OK)
@@ -60,6 +64,17 @@ std::map<std::string, MatchEvidence> read_match_evidence(const std::filesystem::
       }
   });
   return evidence;
+}
+
+void forget_matches(const std::filesystem::path& database) {
+  const auto db = open_database(database, SQLITE_OPEN_READWRITE);
+  char* error = nullptr;
+  if (sqlite3_exec(db.get(), "DELETE FROM matches; DELETE FROM two_view_geometries;", nullptr, nullptr, &error) !=
+      SQLITE_OK) {
+    const std::string why = error ? error : "unknown error";
+    sqlite3_free(error);
+    throw std::runtime_error(database.string() + ": cannot clear colmap's matches: " + why);
+  }
 }
 
 }  // namespace desplat::sfm

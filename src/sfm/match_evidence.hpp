@@ -19,4 +19,9 @@ struct MatchEvidence {
 // colmap database.
 std::map<std::string, MatchEvidence> read_match_evidence(const std::filesystem::path& database);
 
+// Deletes every match and verified pair from a colmap database, keeping images, cameras and
+// features, so a matcher run on it matches every pair again (it skips pairs it has). Throws
+// std::runtime_error naming the file when that fails.
+void forget_matches(const std::filesystem::path& database);
+
 }  // namespace desplat::sfm

@@ -47,77 +47,6 @@ std::string seconds_text(double s) {  // "0.5", "3675"
   return buf;
 }
 
-// ---- Photos ------------------------------------------------------------------------------
-
-// Formats colmap's image reader (FreeImage) handles that OpenImageIO can also check.
-bool has_image_extension(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  static const char* const kExtensions[] = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm"};
-  return std::any_of(std::begin(kExtensions), std::end(kExtensions), [&](const char* e) { return ext == e; });
-}
-
-// Why a file colmap would be given is not a usable photo ("" when it is one). colmap's reader
-// skips such files quietly or, for a truncated JPEG, reads grey rows; either way the user must
-// hear which file was left out and why.
-std::string photo_problem(const fs::path& p, const fs::path& rel) {
-  if (!has_image_extension(p)) return "not a photo (extension is not .jpg, .jpeg, .png, .tif, .tiff, .bmp, .ppm or .pgm)";
-  if (rel.string().find_first_of("\r\n") != std::string::npos)
-    return "its name holds a line break, which colmap's list of images cannot hold; rename it";
-  std::error_code ec;
-  if (fs::file_size(p, ec) == 0 && !ec) return "empty file (0 bytes)";
-  auto in = OIIO::ImageInput::open(p.string());
-  if (!in) {
-    std::string why = OIIO::geterror();  // also clears OIIO's pending error
-    if (why.empty()) why = "unknown format";
-    return "cannot be opened as an image: " + why;
-  }
-  const bool has_pixels = in->spec().width > 0 && in->spec().height > 0;
-  const std::string format = in->format_name();
-  in->close();
-  if (!has_pixels) return "the image has no pixels";
-  try {
-    if (format == "jpeg" && !jpeg_reaches_end_marker(p))
-      return "the JPEG is truncated (its data stops before the end marker; a copy cut short?)";
-  } catch (const std::runtime_error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-PhotoScan scan_photo_folder(const fs::path& dir) {
-  std::error_code ec;
-  if (!fs::exists(dir, ec))
-    fail(SfmErrorKind::BadImages, "the images folder " + in_quotes(dir) +
-                                      " does not exist; pass the folder that holds your photos with --images");
-  if (!fs::is_directory(dir, ec))
-    fail(SfmErrorKind::BadImages,
-         in_quotes(dir) + " is not a folder; --images takes the folder that holds your photos");
-  PhotoScan scan;
-  fs::recursive_directory_iterator it(dir, fs::directory_options::skip_permission_denied, ec);
-  if (ec) fail(SfmErrorKind::BadImages, "cannot list the images folder " + in_quotes(dir) + ": " + ec.message());
-  for (; it != fs::recursive_directory_iterator(); it.increment(ec)) {
-    if (ec) fail(SfmErrorKind::BadImages, "cannot list the images folder " + in_quotes(dir) + ": " + ec.message());
-    const fs::path& p = it->path();
-    const std::string name = p.filename().string();
-    if (name.empty() || name[0] == '.') {  // hidden files and folders (.DS_Store, .thumbnails)
-      if (it->is_directory(ec)) it.disable_recursion_pending();
-      continue;
-    }
-    if (!it->is_regular_file(ec)) continue;
-    const fs::path rel = p.lexically_relative(dir);
-    std::string problem = photo_problem(p, rel);
-    if (problem.empty())
-      scan.photos.push_back(rel);
-    else
-      scan.skipped.push_back({rel, std::move(problem)});
-  }
-  std::sort(scan.photos.begin(), scan.photos.end());
-  std::sort(scan.skipped.begin(), scan.skipped.end(),
-            [](const SkippedFile& a, const SkippedFile& b) { return a.path < b.path; });
-  return scan;
-}
-
 void check_photos_found(const PhotoScan& scan, const fs::path& dir) {
   if (!scan.photos.empty()) return;
   if (scan.skipped.empty())
@@ -130,20 +59,14 @@ void check_photos_found(const PhotoScan& scan, const fs::path& dir) {
 }
 
 int resolve_min_registered(const SfmOptions& o, int num_photos) {
-  const std::string found = "found only " + std::to_string(num_photos) + " photo(s) in " + in_quotes(o.images);
-  const auto too_few = [&](int need) {
-    fail(SfmErrorKind::BadImages, found + "; structure from motion needs at least " + std::to_string(need) +
+  const double share = o.min_registered_share;
+  if (!(share > 0 && share <= 1))
+    fail(SfmErrorKind::BadOptions, "--min-registered-share must be in (0, 1], got " + std::to_string(share));
+  const int wanted = required_registered(share, num_photos);
+  if (num_photos < wanted)
+    fail(SfmErrorKind::BadImages, "found only " + std::to_string(num_photos) + " photo(s) in " + in_quotes(o.images) +
+                                      "; structure from motion needs at least " + std::to_string(wanted) +
                                       " overlapping photos (20-200 is typical)");
-  };
-  if (!o.min_registered) {
-    const int wanted = default_min_registered(num_photos);
-    if (num_photos < wanted) too_few(wanted);
-    return wanted;
-  }
-  const int wanted = *o.min_registered;
-  if (wanted < 1) fail(SfmErrorKind::BadOptions, "--min-registered must be at least 1, got " + std::to_string(wanted));
-  if (num_photos < 2) too_few(2);
-  if (num_photos < wanted) fail(SfmErrorKind::BadImages, found + " but --min-registered is " + std::to_string(wanted));
   return wanted;
 }
 
@@ -355,38 +278,70 @@ void finish_stage(Context& c, const std::string& command, const StageOutput& s) 
 
 std::string threads(int n) { return std::to_string(n); }
 
-std::vector<std::string> extract_args(const SfmOptions& o, const Layout& l) {
-  return {"--database_path", l.database.string(), "--image_path", l.images.string(), "--image_list_path",
-          l.image_list.string(), "--ImageReader.camera_model", o.camera_model, "--ImageReader.single_camera",
-          o.single_camera ? "1" : "0", "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads",
-          threads(o.num_threads), "--log_to_stderr", "1"};
+// Where one try at a model reads and writes: the first run uses <out>/database.db and
+// <out>/sparse; an escalation step that matches again has its own folder under attempts/.
+struct Workspace {
+  fs::path database, sparse_root;
+};
+
+std::vector<std::string> extract_args(const SfmOptions& o, const Layout& l, const Workspace& w, bool single_camera,
+                                      const std::vector<std::string>& extra) {
+  const std::string model = o.camera_model.empty() ? auto_camera_model(single_camera) : o.camera_model;
+  std::vector<std::string> a = {"--database_path", w.database.string(), "--image_path", l.images.string(),
+                                "--image_list_path", l.image_list.string(), "--ImageReader.camera_model",
+                                model, "--ImageReader.single_camera", single_camera ? "1" : "0",
+                                "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads",
+                                threads(o.num_threads), "--log_to_stderr", "1"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
 }
 
 // About 25 blocks, so the matching progress moves; the set of image pairs is the same.
 int exhaustive_block_size(int num_photos) { return std::clamp((num_photos + 4) / 5, 10, 50); }
 
-std::vector<std::string> match_args(const SfmOptions& o, const Layout& l, Matcher m, int num_photos) {
-  std::vector<std::string> a = {"--database_path", l.database.string(), "--SiftMatching.use_gpu", "0",
+std::vector<std::string> match_args(const SfmOptions& o, const Workspace& w, Matcher m, int num_photos,
+                                    const std::vector<std::string>& extra) {
+  std::vector<std::string> a = {"--database_path", w.database.string(), "--SiftMatching.use_gpu", "0",
                                 "--SiftMatching.num_threads", threads(o.num_threads), "--log_to_stderr", "1"};
   if (m == Matcher::Exhaustive)
     a.insert(a.end(), {"--ExhaustiveMatching.block_size", std::to_string(exhaustive_block_size(num_photos))});
+  a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
 
 // colmap drops sub-models smaller than min(10, #photos); a lower floor keeps a small
 // partial model so the user hears "only N of M" (and can accept it) instead of "no model".
-std::vector<std::string> map_args(const SfmOptions& o, const Layout& l, int min_registered) {
-  return {"--database_path", l.database.string(), "--image_path", l.images.string(), "--output_path",
-          l.sparse_root.string(), "--Mapper.num_threads", threads(o.num_threads), "--Mapper.min_model_size",
-          std::to_string(std::min(min_registered, 3)), "--log_to_stderr", "1"};
+std::vector<std::string> map_args(const SfmOptions& o, const Layout& l, const Workspace& w, int min_registered,
+                                  const std::vector<std::string>& extra) {
+  std::vector<std::string> a = {"--database_path", w.database.string(), "--image_path", l.images.string(),
+                                "--output_path", w.sparse_root.string(), "--Mapper.num_threads",
+                                threads(o.num_threads), "--Mapper.min_model_size",
+                                std::to_string(std::min(min_registered, 3)), "--log_to_stderr", "1"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
 }
 
-StageOutput run_matching(Context& c, const SfmOptions& o, Matcher m) {
+StageOutput run_extraction(Context& c, const SfmOptions& o, const Workspace& w, bool single_camera,
+                           const std::vector<std::string>& extra) {
+  StageOutput out = run_stage(c, SfmStage::Extract, "feature_extractor",
+                              extract_args(o, c.layout, w, single_camera, extra), c.num_photos);
+  finish_stage(c, "feature_extractor", out);
+  return out;
+}
+
+StageOutput run_matching(Context& c, const SfmOptions& o, const Workspace& w, const std::vector<std::string>& extra) {
+  const Matcher m = c.matcher;
   const std::string command = std::string(matcher_name(m)) + "_matcher";
-  auto args = match_args(o, c.layout, m, c.num_photos);
-  if (m != Matcher::Exhaustive) return run_stage(c, SfmStage::Match, command, std::move(args), c.num_photos);
-  const int block = exhaustive_block_size(c.num_photos), blocks = (c.num_photos + block - 1) / block;
-  return run_stage(c, SfmStage::Match, command, std::move(args), blocks * blocks, "block");
+  auto args = match_args(o, w, m, c.num_photos, extra);
+  StageOutput out;
+  if (m != Matcher::Exhaustive) {
+    out = run_stage(c, SfmStage::Match, command, std::move(args), c.num_photos);
+  } else {
+    const int block = exhaustive_block_size(c.num_photos), blocks = (c.num_photos + block - 1) / block;
+    out = run_stage(c, SfmStage::Match, command, std::move(args), blocks * blocks, "block");
+  }
+  finish_stage(c, command, out);
+  return out;
 }
 
 // ---- Models ------------------------------------------------------------------------------
@@ -493,7 +448,7 @@ std::string why_not_placed(const std::string& name, const std::vector<ModelInfo>
       return "placed in a separate model (" + models[k].dir.filename().string() + ", " +
              std::to_string(models[k].registered) +
              " photos) that colmap could not join to the largest: too few matches between the two groups";
-  if (!evidence) return "not in the model (colmap's database could not be read for a reason)";
+  if (!evidence) return "not in the model (colmap's database could not be read)";
   const auto it = evidence->find(name);
   if (it == evidence->end()) return "colmap did not add it to its database (it could not read the photo)";
   const MatchEvidence& e = it->second;
@@ -522,21 +477,275 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, con
   return missing;
 }
 
-void check_registered(const Context& c, Matcher m, const std::vector<ModelInfo>& models, int min_registered,
-                      const std::vector<fs::path>& photos) {
+// The largest share of photos, rounded down to a hundredth, that `registered` of `n` meets.
+std::string share_text(int registered, int n) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", std::floor(100.0 * registered / std::max(1, n)) / 100.0);
+  return buf;
+}
+
+void check_registered(const Context& c, const std::vector<ModelInfo>& models, const fs::path& database,
+                      int min_registered, const std::vector<fs::path>& photos, const std::vector<SfmAttempt>& attempts) {
   const ModelInfo& best = models[0];
   if (best.registered >= min_registered) return;
   SfmResult lost;
   lost.num_photos = c.num_photos;
-  lost.unregistered = photos_not_in(models, photos, c.layout.database);
+  std::string tried;
+  for (const SfmAttempt& a : attempts) tried += (tried.empty() ? "" : ", ") + a.step + " " + std::to_string(a.registered);
+  lost.unregistered = photos_not_in(models, photos, database);
   std::string names = describe_lost_photos(lost);
   if (!names.empty() && names.back() == '\n') names.pop_back();
+  const std::string accept =
+      best.registered >= 3 ? "; to use it anyway, run again with --overwrite --min-registered-share " +
+                                 share_text(best.registered, c.num_photos)
+                           : "";
   fail(SfmErrorKind::TooFewRegistered,
        "only " + std::to_string(best.registered) + " of " + std::to_string(c.num_photos) +
            " photos could be placed (at least " + std::to_string(min_registered) + " needed); " + kPhotoAdvice + "." +
-           matcher_hint(m) + " The partial model is kept in " + in_quotes(best.dir) +
-           "; to use it anyway, run again with --overwrite --min-registered " + std::to_string(best.registered) +
+           matcher_hint(c.matcher) + " Photos placed by each step: " + tried + ". The partial model is kept in " +
+           in_quotes(best.dir) + accept +
            ". Details: " + in_quotes(c.layout.log) + "\n" + names);
+}
+
+// ---- Escalation ---------------------------------------------------------------------------
+//
+// colmap's defaults are made for thousands of features per photo over wide baselines. A
+// capture that registers fewer than kEscalateBelowShare of its photos gets the steps below, in
+// order of cost, until one reaches that share; the model with the most photos wins.
+
+// colmap starts a model from a pair with 100 inliers and 16° of triangulation angle and adds a
+// photo with 30 inliers. Small or low-texture photos, narrow baselines and collections with few
+// shared features have no such pair. A third to a half of each still leaves tens of inliers,
+// far above the 5 a two-view pose needs, so a wrong start stays unlikely (the reprojection
+// error of the result is reported).
+const std::vector<std::string> kRelaxedMapper = {"--Mapper.init_min_num_inliers", "30", "--Mapper.init_min_tri_angle",
+                                                 "4", "--Mapper.abs_pose_min_num_inliers", "15"};
+// Registering into a finished model uses the same per-photo threshold.
+const std::vector<std::string> kRelaxedRegistration = {"--Mapper.abs_pose_min_num_inliers", "15"};
+// Guided matching re-matches each verified pair along its epipolar geometry, recovering matches
+// the ratio test threw away; it costs about one more matching pass.
+const std::vector<std::string> kGuidedMatching = {"--SiftMatching.guided_matching", "1"};
+// Twice colmap's 8,192 features, and domain-size pooling (descriptors pooled over scales,
+// sturdier across zoom and viewpoint; CPU-only in colmap): the most expensive step, as
+// matching cost grows with the square of the features.
+const std::vector<std::string> kMoreFeatures = {"--SiftExtraction.max_num_features", "16000",
+                                                "--SiftExtraction.domain_size_pooling", "1"};
+
+// The escalation steps' names, as the log, metrics.json and the result say them.
+constexpr const char* kStepRelaxedMapper = "relaxed mapper";
+constexpr const char* kStepRegisterRest = "register the rest";
+constexpr const char* kStepGuidedMatching = "guided matching";
+constexpr const char* kStepMoreFeatures = "more features";
+
+std::string joined(const std::vector<std::string>& args) {
+  std::string s;
+  for (const std::string& a : args) s += (s.empty() ? "" : " ") + a;
+  return s;
+}
+
+// One try's models, ranked largest first.
+struct Candidate {
+  Workspace where;
+  std::vector<ModelInfo> models;
+  int registered() const { return models.empty() ? 0 : std::max(0, models[0].registered); }
+  int points() const { return models.empty() ? 0 : models[0].points; }
+};
+
+bool better(const Candidate& a, const Candidate& b) {
+  return a.registered() != b.registered() ? a.registered() > b.registered() : a.points() > b.points();
+}
+
+// A mapper run into w.sparse_root. A mapper that ends without a model is an empty candidate;
+// any other failure is an error.
+Candidate run_mapper(Context& c, const SfmOptions& o, const Workspace& w, int min_registered,
+                     const std::vector<std::string>& extra, StageOutput* last_map) {
+  std::error_code ec;
+  fs::create_directories(w.sparse_root, ec);
+  const StageOutput map =
+      run_stage(c, SfmStage::Map, "mapper", map_args(o, c.layout, w, min_registered, extra), c.num_photos);
+  Candidate cand{w, collect_models(w.sparse_root)};
+  const bool have_model = !cand.models.empty() && cand.models[0].registered > 0;
+  if (map.exit.how == ProcessExit::How::Exited && !cand.models.empty() && cand.models[0].registered < 0)
+    fail(SfmErrorKind::NoModel, "colmap mapper wrote a model that cannot be read: " + cand.models[0].error +
+                                    ". The full output is in " + in_quotes(c.layout.log));
+  if (!have_model && !(map.exit.ok() || said_no_model(map))) stage_failed(c, "mapper", map);
+  if (have_model && !map.exit.ok()) stage_failed(c, "mapper", map);
+  if (!have_model) cand.models.clear();
+  *last_map = map;
+  SfmProgress done = map.last;
+  done.model = 1, done.done = cand.registered(), done.finished = true;
+  report(c, done);
+  return cand;
+}
+
+// image_registrator places the photos `from` lacks into its largest model (with the relaxed
+// per-photo threshold), then bundle_adjuster refines the whole. Photos of colmap's smaller
+// sub-models join this way too: model_merger needs photos two models share, which sub-models
+// of one mapper run do not have.
+Candidate register_rest(Context& c, const SfmOptions& o, const Candidate& from, const fs::path& folder) {
+  const Workspace w{from.where.database, folder / "sparse"};
+  const fs::path model = w.sparse_root / "0";
+  std::error_code ec;
+  fs::create_directories(model, ec);
+  std::vector<std::string> reg = {"--database_path", w.database.string(), "--input_path",
+                                  from.models[0].dir.string(), "--output_path", model.string(),
+                                  "--Mapper.num_threads", threads(o.num_threads), "--log_to_stderr", "1"};
+  reg.insert(reg.end(), kRelaxedRegistration.begin(), kRelaxedRegistration.end());
+  const StageOutput r = run_stage(c, SfmStage::Map, "image_registrator", std::move(reg), c.num_photos);
+  if (!r.exit.ok()) stage_failed(c, "image_registrator", r);
+  const StageOutput ba =
+      run_stage(c, SfmStage::Map, "bundle_adjuster",
+                {"--input_path", model.string(), "--output_path", model.string(), "--log_to_stderr", "1"}, c.num_photos);
+  if (!ba.exit.ok()) stage_failed(c, "bundle_adjuster", ba);
+  Candidate cand{w, collect_models(w.sparse_root)};
+  if (!cand.models.empty() && cand.models[0].registered < 0)
+    fail(SfmErrorKind::NoModel, "colmap image_registrator wrote a model that cannot be read: " +
+                                    cand.models[0].error + ". The full output is in " + in_quotes(c.layout.log));
+  return cand;
+}
+
+// A copy of `database` without matches, so the matcher (which skips pairs it has) runs again
+// on the same features.
+void copy_features_only(const fs::path& database, const fs::path& copy) {
+  std::error_code ec;
+  fs::copy_file(database, copy, fs::copy_options::overwrite_existing, ec);
+  if (ec) fail(SfmErrorKind::OutputExists, "cannot copy " + in_quotes(database) + ": " + ec.message());
+  try {
+    forget_matches(copy);
+  } catch (const std::exception& e) {
+    fail(SfmErrorKind::StageFailed, e.what());
+  }
+}
+
+struct Ladder {
+  Ladder(Context& context, const SfmOptions& options, int min_registered_photos, bool single)
+      : c(context), o(options), min_registered(min_registered_photos), single_camera(single) {}
+
+  Context& c;
+  const SfmOptions& o;
+  int min_registered;
+  bool single_camera;
+  std::vector<SfmAttempt> attempts;
+  Candidate best;
+  StageOutput last_map;
+  double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // of the first run
+
+  bool enough() const { return best.registered() >= kEscalateBelowShare * c.num_photos; }
+
+  fs::path step_folder(const std::string& name) const {
+    return c.layout.out / "attempts" / (std::to_string(attempts.size()) + "-" + name);
+  }
+
+  void record(const std::string& step, const std::vector<std::string>& settings, const Candidate& cand,
+              double seconds) {
+    attempts.push_back({step, joined(settings), cand.registered(), cand.points(), seconds});
+    c.log << "\n######## desplat_sfm: step '" << step << "' (" << joined(settings) << "): " << cand.registered()
+          << " of " << c.num_photos << " photos, " << cand.points() << " points, " << seconds << " s\n"
+          << std::flush;
+    if (better(cand, best)) best = cand;
+  }
+
+  void first_run(const std::string& camera_text) {
+    const Stopwatch clock;
+    const Workspace w{c.layout.database, c.layout.sparse_root};
+    extract_seconds = run_extraction(c, o, w, single_camera, {}).seconds;
+    match_seconds = run_matching(c, o, w, {}).seconds;
+    best = run_mapper(c, o, w, min_registered, {}, &last_map);
+    map_seconds = last_map.seconds;
+    attempts.push_back({"colmap defaults", camera_text + ", " + matcher_name(c.matcher) + " matching",
+                        best.registered(), best.points(), clock.seconds()});
+  }
+
+  void relaxed_mapper() {
+    const Stopwatch clock;
+    const Workspace w{best.where.database, step_folder("relaxed-mapper") / "sparse"};
+    const Candidate cand = run_mapper(c, o, w, min_registered, kRelaxedMapper, &last_map);
+    record(kStepRelaxedMapper, kRelaxedMapper, cand, clock.seconds());
+  }
+
+  void register_the_rest() {
+    if (best.registered() == 0) return;
+    const Stopwatch clock;
+    const Candidate cand = register_rest(c, o, best, step_folder("register-rest"));
+    record(kStepRegisterRest, kRelaxedRegistration, cand, clock.seconds());
+  }
+
+  // Guided matching and the relaxed mapper, on a copy of the first run's features or, with
+  // `new_features`, on features extracted again with those options.
+  void match_again(const char* step, const std::string& folder_name, const std::vector<std::string>* new_features) {
+    const Stopwatch clock;
+    const fs::path folder = step_folder(folder_name);
+    const Workspace w{folder / "database.db", folder / "sparse"};
+    fs::create_directories(folder);
+    std::vector<std::string> settings;
+    if (new_features) {
+      run_extraction(c, o, w, single_camera, *new_features);
+      settings = *new_features;
+    } else {
+      copy_features_only(c.layout.database, w.database);
+    }
+    run_matching(c, o, w, kGuidedMatching);
+    settings.insert(settings.end(), kGuidedMatching.begin(), kGuidedMatching.end());
+    settings.insert(settings.end(), kRelaxedMapper.begin(), kRelaxedMapper.end());
+    const Candidate cand = run_mapper(c, o, w, min_registered, kRelaxedMapper, &last_map);
+    record(step, settings, cand, clock.seconds());
+  }
+
+  void guided_matching() { match_again(kStepGuidedMatching, "guided-matching", nullptr); }
+  void more_features() { match_again(kStepMoreFeatures, "more-features", &kMoreFeatures); }
+
+  using Step = void (Ladder::*)();
+  static std::string step_name(Step step) {
+    if (step == &Ladder::relaxed_mapper) return kStepRelaxedMapper;
+    if (step == &Ladder::register_the_rest) return kStepRegisterRest;
+    if (step == &Ladder::guided_matching) return kStepGuidedMatching;
+    return kStepMoreFeatures;
+  }
+
+  void run() {
+    const Step steps[] = {&Ladder::relaxed_mapper,  &Ladder::register_the_rest, &Ladder::guided_matching,
+                          &Ladder::register_the_rest, &Ladder::more_features,   &Ladder::register_the_rest};
+    for (const Step step : steps) {
+      if (enough()) return;
+      const size_t before = attempts.size();
+      try {
+        (this->*step)();
+      } catch (const SfmError& e) {
+        // A step that fails or runs past its time limit ends the escalation; the models found
+        // so far are kept (a long run never loses work to a later, optional step).
+        if (e.kind() != SfmErrorKind::TimedOut && e.kind() != SfmErrorKind::StageFailed &&
+            e.kind() != SfmErrorKind::NoModel)
+          throw;
+        const std::string what = e.what();
+        if (attempts.size() == before) attempts.push_back({step_name(step), "", 0, 0, 0});
+        attempts.back().settings += std::string(attempts.back().settings.empty() ? "" : "; ") +
+                                    "stopped: " + what.substr(0, what.find('\n'));
+        c.log << "\n######## desplat_sfm: escalation stopped: " << what << "\n" << std::flush;
+        return;
+      }
+    }
+  }
+};
+
+// Puts the winning step's models in <out>/sparse (and its database in <out>/database.db); what
+// they replace moves to attempts/0-colmap-defaults, so nothing is deleted.
+Candidate install_winner(const Context& c, Candidate best) {
+  const Layout& l = c.layout;
+  if (best.where.sparse_root == l.sparse_root) return best;
+  const fs::path keep = l.out / "attempts" / "0-colmap-defaults";
+  std::error_code ec;
+  fs::create_directories(keep, ec);
+  const auto move = [&](const fs::path& from, const fs::path& to) {
+    fs::rename(from, to, ec);
+    if (ec) fail(SfmErrorKind::OutputExists, "cannot move " + in_quotes(from) + " to " + in_quotes(to) + ": " + ec.message());
+  };
+  move(l.sparse_root, keep / "sparse");
+  move(best.where.sparse_root, l.sparse_root);
+  if (best.where.database != l.database) {
+    move(l.database, keep / "database.db");
+    move(best.where.database, l.database);
+  }
+  return Candidate{{l.database, l.sparse_root}, collect_models(l.sparse_root)};
 }
 
 }  // namespace
@@ -564,7 +773,9 @@ Matcher choose_matcher(Matcher requested, int num_images) {
   return num_images <= kExhaustiveMaxImages ? Matcher::Exhaustive : Matcher::Sequential;
 }
 
-int default_min_registered(int num_images) { return std::max(3, (num_images + 1) / 2); }
+int required_registered(double share, int num_images) {
+  return std::max(3, static_cast<int>(std::ceil(share * num_images - 1e-9)));
+}
 
 double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos) {
   const double n = std::max(1, num_photos);
@@ -575,8 +786,6 @@ double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos)
   }
   return 0;
 }
-
-PhotoScan scan_photos(const fs::path& dir) { return scan_photo_folder(dir); }
 
 std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
   std::string text;
@@ -597,62 +806,69 @@ std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
   return text;
 }
 
+std::string describe_attempts(const SfmResult& r) {
+  std::string text = "cameras: " + r.cameras.reason + "\n";
+  for (const SfmAttempt& a : r.attempts) {
+    char line[160];
+    std::snprintf(line, sizeof line, "  %-18s %d of %d photos, %d points, %.0f s", (a.step + ":").c_str(),
+                  a.registered, r.num_photos, a.points, a.seconds);
+    text += line + std::string(" (") + a.settings + ")\n";
+  }
+  if (!r.warning.empty()) text += "warning: " + r.warning + "\n";
+  return text;
+}
+
 SfmResult run_sfm(const SfmOptions& o) {
   const Stopwatch clock;
-  check_camera_model(o.camera_model);
+  if (!o.camera_model.empty()) check_camera_model(o.camera_model);
   if (o.stage_time_limit_s && !(*o.stage_time_limit_s > 0))
     fail(SfmErrorKind::BadOptions, "the stage time limit must be positive, got " + std::to_string(*o.stage_time_limit_s) + " s");
   const fs::path colmap_exe = require_colmap(o.colmap);
-  const PhotoScan scan = scan_photo_folder(o.images);
+  const PhotoScan scan = scan_photos(o.images);
   check_photos_found(scan, o.images);
   const int num_photos = static_cast<int>(scan.photos.size());
   const int min_registered = resolve_min_registered(o, num_photos);
+  const CameraChoice cameras = choose_cameras(o.cameras, scan.cameras);
 
   const Matcher matcher = choose_matcher(o.matcher, num_photos);
   Context c{colmap_exe, Layout(o.out), {}, o.on_progress, num_photos, matcher, o.stage_time_limit_s};
   prepare_output(o, c.layout, scan.photos);
   c.log.open(c.layout.log, std::ios::binary | std::ios::trunc);
   if (!c.log) fail(SfmErrorKind::OutputExists, "cannot write the log file " + in_quotes(c.layout.log));
+  c.log << "######## desplat_sfm: " << num_photos << " photos; " << cameras.reason << "\n" << std::flush;
 
-  const StageOutput extract =
-      run_stage(c, SfmStage::Extract, "feature_extractor", extract_args(o, c.layout), num_photos);
-  finish_stage(c, "feature_extractor", extract);
-  const StageOutput match = run_matching(c, o, matcher);
-  finish_stage(c, std::string(matcher_name(matcher)) + "_matcher", match);
-
-  std::error_code ec;
-  fs::create_directories(c.layout.sparse_root, ec);
-  const StageOutput map = run_stage(c, SfmStage::Map, "mapper", map_args(o, c.layout, min_registered), num_photos);
-  std::vector<ModelInfo> models = collect_models(c.layout.sparse_root);
-  const bool have_model = !models.empty() && models[0].registered > 0;
-  if (map.exit.how == ProcessExit::How::Exited && !models.empty() && models[0].registered < 0)
-    fail(SfmErrorKind::NoModel, "colmap mapper wrote a model that cannot be read: " + models[0].error +
-                                    ". The full output is in " + in_quotes(c.layout.log));
-  if (!have_model && (map.exit.ok() || said_no_model(map))) no_model(c, matcher, map);
-  if (!map.exit.ok() || !have_model) stage_failed(c, "mapper", map);
-  renumber_models(models, c.layout.sparse_root);
-
-  SfmProgress done = map.last;
-  done.model = 1, done.done = models[0].registered, done.finished = true;
-  report(c, done);
-  check_registered(c, matcher, models, min_registered, scan.photos);
+  Ladder ladder{c, o, min_registered, cameras.single};
+  const std::string model = o.camera_model.empty() ? auto_camera_model(cameras.single) : o.camera_model;
+  ladder.first_run((cameras.single ? "one shared camera, " : "one camera per photo, ") + model);
+  if (o.escalate) ladder.run();
+  if (ladder.best.registered() == 0) no_model(c, matcher, ladder.last_map);
+  Candidate best = install_winner(c, ladder.best);
+  renumber_models(best.models, c.layout.sparse_root);
+  check_registered(c, best.models, c.layout.database, min_registered, scan.photos, ladder.attempts);
 
   SfmResult r;
   r.images_dir = c.layout.images;
-  r.sparse_dir = models[0].dir;
+  r.sparse_dir = best.models[0].dir;
   r.database = c.layout.database;
   r.log = c.layout.log;
   r.matcher = matcher;
+  r.cameras = cameras;
+  r.attempts = ladder.attempts;
   r.num_photos = num_photos;
-  r.num_registered = models[0].registered;
-  r.num_points = models[0].points;
-  r.num_models = static_cast<int>(models.size());
+  r.num_registered = best.models[0].registered;
+  r.num_points = best.models[0].points;
+  r.num_models = static_cast<int>(best.models.size());
   r.skipped = scan.skipped;
-  r.unregistered = photos_not_in(models, scan.photos, c.layout.database);
-  r.mean_track_length = models[0].mean_track_length;
-  r.mean_reprojection_error = models[0].mean_reprojection_error;
+  r.unregistered = photos_not_in(best.models, scan.photos, c.layout.database);
+  r.mean_track_length = best.models[0].mean_track_length;
+  r.mean_reprojection_error = best.models[0].mean_reprojection_error;
+  if (r.num_registered < kEscalateBelowShare * num_photos)
+    r.warning = std::to_string(num_photos - r.num_registered) + " of " + std::to_string(num_photos) +
+                " photos could not be placed" + (o.escalate ? " even after escalation" : "") +
+                "; they are not trained on (see the list below)";
   r.seconds = clock.seconds();
-  r.extract_seconds = extract.seconds, r.match_seconds = match.seconds, r.map_seconds = map.seconds;
+  r.extract_seconds = ladder.extract_seconds, r.match_seconds = ladder.match_seconds;
+  r.map_seconds = ladder.map_seconds;
   return r;
 }
 

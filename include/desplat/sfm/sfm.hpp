@@ -1,5 +1,6 @@
 // Structure from motion for a folder of photos, by running the `colmap` 3.8 executable
-// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → mapper.
+// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → mapper, then, when
+// fewer than kEscalateBelowShare of the photos are placed, the escalation steps below.
 //
 // Output layout (what the rest of desplat reads), under SfmOptions::out:
 //   images/          a symlink to the input folder (absolute target; the input may be
@@ -10,6 +11,9 @@
 //                    mapper's other models (if any) follow as sparse/1, sparse/2, … by size
 //   colmap.log       everything colmap printed, stage by stage, with each command line
 //   image_list.txt   the photos handed to colmap (names relative to images/)
+//   attempts/        escalation steps, one folder each ("1-relaxed-mapper", ...) with their
+//                    models (and database.db when the step matched again); when a step's model
+//                    wins, its models and database trade places with sparse/ and database.db
 //
 // Failures are SfmError with one message that says what went wrong and what to do. A run
 // never leaves a child process behind and cannot block on colmap's output; colmap killed by
@@ -35,14 +39,14 @@
 namespace desplat::sfm {
 
 enum class SfmErrorKind {
-  BadOptions,        // e.g. unknown camera model, min_registered < 2
+  BadOptions,        // e.g. unknown camera model, min_registered_share outside (0, 1]
   ColmapMissing,     // the executable is not on PATH (or not executable)
   BadImages,         // images folder missing, empty, or without readable images; too few photos
   OutputExists,      // earlier results in `out` and overwrite is off, or `out` unusable
   StageFailed,       // a colmap stage could not start, exited non-zero or was killed by a signal
   TimedOut,          // a colmap stage ran past its time limit and was stopped
   NoModel,           // the mapper produced no model
-  TooFewRegistered,  // the best model holds fewer than min_registered photos (it is kept)
+  TooFewRegistered,  // the best model holds fewer than the required share of photos (it is kept)
 };
 
 class SfmError : public std::runtime_error {
@@ -67,9 +71,41 @@ std::optional<Matcher> matcher_from_name(const std::string& name);
 const char* matcher_name(Matcher matcher);
 // Auto resolved for `num_images` photos; any other value is returned unchanged.
 Matcher choose_matcher(Matcher requested, int num_images);
-// Auto minimum of registered photos: max(3, ⌈n/2⌉). Fewer than half placed means the capture
-// mostly failed; training on the rest would silently drop most of the user's photos.
-int default_min_registered(int num_images);
+// Photos a model must hold for a run to succeed: max(3, ⌈share·n⌉) of n photos. The default
+// share, one half: fewer than half placed means the capture mostly failed, and training on the
+// rest would drop most of the user's photos. Three is the least a model can be trusted with.
+inline constexpr double kDefaultMinRegisteredShare = 0.5;
+int required_registered(double share, int num_images);
+
+// Below this share of placed photos run_sfm escalates (SfmOptions::escalate), and a result
+// below it carries a warning: a tenth of the photos lost is a tenth less model.
+inline constexpr double kEscalateBelowShare = 0.9;
+
+// How photos are given cameras (intrinsics). Auto: one shared camera when every photo has the
+// same size and the same EXIF make, model and focal length (or none of them), one per photo
+// otherwise (choose_cameras).
+enum class CameraSharing { Auto, Single, PerPhoto };
+const char* camera_sharing_name(CameraSharing sharing);  // "auto", "single", "per-photo"
+std::optional<CameraSharing> camera_sharing_from_name(const std::string& name);
+
+// What a photo file says about its camera (what colmap's image reader also reads).
+struct PhotoCamera {
+  int width = 0, height = 0;  // px
+  std::string make, model;    // EXIF; empty when not recorded
+  float focal_mm = 0;         // EXIF focal length; 0 when not recorded
+};
+
+struct CameraChoice {
+  bool single = false;  // one calibration shared by all photos
+  std::string reason;   // for the log: what was decided and why
+};
+CameraChoice choose_cameras(CameraSharing requested, const std::vector<PhotoCamera>& cameras);
+
+// The camera model when the user names none: OPENCV (fx, fy, cx, cy, k1, k2, p1, p2) for one
+// shared camera, which every photo constrains; SIMPLE_RADIAL (f, cx, cy, k, colmap's own
+// default) for one camera per photo, where eight intrinsics from one photo's matches are too
+// many: on 17 cropped, resized fox photos colmap placed 5 with OPENCV and 16 with SIMPLE_RADIAL.
+const char* auto_camera_model(bool single_camera);
 
 enum class SfmStage { Extract, Match, Map };
 
@@ -104,9 +140,14 @@ struct SfmOptions {
   std::filesystem::path images;  // folder of photos (searched recursively; read only)
   std::filesystem::path out;     // created if missing
   Matcher matcher = Matcher::Auto;
-  std::string camera_model = "OPENCV";  // any COLMAP camera model name (colmap.hpp)
-  bool single_camera = false;           // one shared camera for all photos (same camera, zoom)
-  std::optional<int> min_registered;    // nullopt: default_min_registered(photos found)
+  // Any COLMAP camera model name (colmap.hpp); empty: auto_camera_model of the camera choice.
+  std::string camera_model;
+  CameraSharing cameras = CameraSharing::Auto;
+  // Fail (TooFewRegistered, the model kept) when the best model holds fewer photos than
+  // required_registered(share, photos found); in (0, 1].
+  double min_registered_share = kDefaultMinRegisteredShare;
+  // Run the escalation steps (run_sfm) when fewer than kEscalateBelowShare of the photos are placed.
+  bool escalate = true;
   int num_threads = -1;                 // colmap's: -1 = all cores
   bool copy_images = false;             // copy the photos into <out>/images instead of a symlink
   bool overwrite = false;               // replace database.db, sparse/ and the log of an earlier run
@@ -123,12 +164,24 @@ struct SkippedFile {
   std::string reason;  // "empty file (0 bytes)", "the JPEG is truncated (...)", ...
 };
 
+// One try at placing the photos: the first run, or an escalation step.
+struct SfmAttempt {
+  std::string step;      // "colmap defaults", "relaxed mapper", "register the rest", ...
+  std::string settings;  // the colmap options it changed
+  int registered = 0;    // photos in its largest model (0: no model)
+  int points = 0;        // 3D points in that model
+  double seconds = 0;    // wall time of the step
+};
+
 struct SfmResult {
   std::filesystem::path images_dir;  // <out>/images
   std::filesystem::path sparse_dir;  // <out>/sparse/0
   std::filesystem::path database;    // <out>/database.db
   std::filesystem::path log;         // <out>/colmap.log
   Matcher matcher = Matcher::Exhaustive;  // as resolved
+  CameraChoice cameras;                   // as resolved, with its reason
+  std::vector<SfmAttempt> attempts;       // the first run, then each escalation step, in order
+  std::string warning;                    // non-empty when fewer than kEscalateBelowShare are placed
   int num_photos = 0;                // readable photos found and handed to colmap
   std::vector<SkippedFile> skipped;  // files in the images folder that were not photos colmap can use
   // Photos handed to colmap that sparse/0 does not hold, each with the reason the other models
@@ -149,6 +202,11 @@ struct SfmResult {
 // Empty when nothing was lost.
 std::string describe_lost_photos(const SfmResult& result, size_t max_names = 20);
 
+// How the photos were placed, for a person: the camera choice and its reason, then one line per
+// attempt ("colmap defaults: 30 of 44 photos, 1189 points, 114 s (one shared camera, ...)"),
+// then the warning if any.
+std::string describe_attempts(const SfmResult& result);
+
 // Runs the whole pipeline; see the file comment for the layout and errors.
 SfmResult run_sfm(const SfmOptions& options);
 
@@ -158,6 +216,7 @@ SfmResult run_sfm(const SfmOptions& options);
 // (BadImages) when `dir` is missing or not a folder (an empty folder is not an error here).
 struct PhotoScan {
   std::vector<std::filesystem::path> photos;
+  std::vector<PhotoCamera> cameras;  // of each photo, in the same order
   std::vector<SkippedFile> skipped;
 };
 PhotoScan scan_photos(const std::filesystem::path& dir);
