@@ -18,6 +18,9 @@ int main(int argc, char** argv) {
   app.add_flag("--alpha", o.alpha, "write RGBA PNGs whose alpha is the layer's coverage");
   app.add_flag("--figure", o.figure,
                "also write <name>_row.png: truth | static | distractor | composite | mask (training views)");
+  app.add_option("--appearance", o.appearance,
+                 "a training view's name: render the static layer in that photo's exposure and colour "
+                 "(models trained with --effects ...,appearance; default: the plain colours of point_cloud.ply)");
   app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
   try {

@@ -20,6 +20,7 @@ struct Spec {
 TrainableGaussians build(const std::vector<Spec>& specs) {
   GaussianSet g;
   g.sh_degree = 1;
+  g.feature_dim = 2;  // appearance features ride along with every copy
   g.resize(specs.size());
   for (size_t i = 0; i < specs.size(); ++i) {
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = float(i) + 0.1f * k;
@@ -28,6 +29,7 @@ TrainableGaussians build(const std::vector<Spec>& specs) {
     g.quats[4 * i] = 1;
     g.opacity_logits[i] = logit(specs[i].opacity);
     for (int k = 0; k < 12; ++k) g.colors[12 * i + k] = float(i) + 0.01f * k;
+    for (int k = 0; k < 2; ++k) g.features[2 * i + k] = float(i) + 0.5f * k;
   }
   TrainableGaussians t(g);
   for (size_t i = 0; i < specs.size(); ++i) {
@@ -66,6 +68,7 @@ TEST(Density, SplitDuplicateCullDuringDensification) {
     EXPECT_NEAR(std::exp(t.params.log_scales[3 * i]), parent_scale[c] / 1.6f, 1e-6f);
     EXPECT_NEAR(t.params.means[3 * i], float(parents[c]), 6 * parent_scale[c]);  // a draw from the parent
     EXPECT_EQ(t.params.colors[12 * i], float(parents[c]));
+    EXPECT_EQ(t.params.features[2 * i + 1], float(parents[c]) + 0.5f);
     for (int gr = 0; gr < kParamGroups; ++gr) EXPECT_EQ(t.adam_m[gr][i * t.floats_per_gaussian(ParamGroup(gr))], 0.0f);
   }
   const int dup_parents[3] = {1, 4, 5};
@@ -73,6 +76,7 @@ TEST(Density, SplitDuplicateCullDuringDensification) {
   for (int d = 0; d < 3; ++d) {
     const size_t i = 8 + d;
     EXPECT_EQ(t.params.means[3 * i], float(dup_parents[d]));  // exact copy of the position
+    EXPECT_EQ(t.params.features[2 * i], float(dup_parents[d]));
     EXPECT_NEAR(std::exp(t.params.log_scales[3 * i]), dup_scale[d], 1e-6f);
   }
   EXPECT_EQ(t.adam_m[0][0], 1.0f);          // survivors keep their moments

@@ -140,15 +140,7 @@ TEST(Distractors, RefineCullsUnseenAndDensifiesOnlyBefore15000) {
 }
 
 TrainConfig desplat_config(int64_t iterations) {
-  TrainConfig c;
-  c.iterations = iterations;
-  c.sh_degree = 1;
-  c.sh_degree_interval = 100;
-  c.resolution_schedule = 100;
-  c.densify.warmup = 100;
-  c.densify.refine_every = 50;
-  c.densify.reset_alpha_every = 1000;
-  c.threads = 2;
+  TrainConfig c = short_schedule(iterations);
   c.distractors.initial_count = 200;
   c.distractors.reference_pixels = 0;  // 200 per view even on these tiny images
   return c;

@@ -279,6 +279,53 @@ TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {
   EXPECT_NE(bad.output.find("--mask needs a DeSplat model"), std::string::npos) << bad.output;
 }
 
+// --effects distractors,appearance: the run says which protocol scored the test views, and
+// desplat_render --appearance NAME (from the checkpoint) draws the static layer exactly as the
+// trainer drew it in NAME's figure row (renders/train, the view's own embedding).
+TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
+  const fs::path out = root_ / "appearance";
+  const Outcome r = run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,appearance");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("appearance model: embeddings of 32 per training image"), std::string::npos) << r.output;
+  nlohmann::json metrics, config;
+  std::ifstream(out / "metrics.json") >> metrics;
+  std::ifstream(out / "config.json") >> config;
+  EXPECT_EQ(config["run"]["effects"], "distractors,appearance");
+  EXPECT_EQ(metrics["protocol"], "appearance fitted on the left half, scored on the right half");
+  for (const auto& v : metrics["views"]) EXPECT_EQ(v["protocol"], metrics["protocol"]);
+
+  const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
+  const Outcome ok = run(render + " --out " + (root_ / "look").string() + " --views view_1.png --appearance view_1.png");
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  const FloatImage single = read_image_rgb(root_ / "look" / "view_1.png");
+  const FloatImage row = read_image_rgb(out / "renders" / "train" / "view_1.png");
+  ASSERT_EQ(row.width, 5 * single.width);
+  for (int y = 0; y < single.height; ++y)
+    for (int x = 0; x < single.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(single.pixels[3 * (size_t(y) * single.width + x) + c],
+                  row.pixels[3 * (size_t(y) * row.width + single.width + x) + c])
+            << "pixel " << x << "," << y;
+  // Negative control: the plain colours are another image.
+  const Outcome plain_look = run(render + " --out " + (root_ / "plain").string() + " --views view_1.png");
+  ASSERT_EQ(plain_look.exit_code, 0) << plain_look.output;
+  EXPECT_NE(read_image_rgb(root_ / "plain" / "view_1.png").pixels, single.pixels);
+
+  const Outcome test_view = run(render + " --out " + (root_ / "look2").string() + " --appearance view_0.png");
+  EXPECT_EQ(test_view.exit_code, 1);
+  EXPECT_NE(test_view.output.find("'view_0.png' is not a training view"), std::string::npos) << test_view.output;
+  const Outcome plain = run(train() + " --out " + (root_ / "no_look").string() + " --iterations 5 --threads 2");
+  ASSERT_EQ(plain.exit_code, 0) << plain.output;
+  const Outcome none = run(std::string(DESPLAT_RENDER_BIN) + " --model " + (root_ / "no_look").string() + " --out " +
+                           (root_ / "look3").string() + " --appearance view_1.png");
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_NE(none.output.find("was trained without an appearance model"), std::string::npos) << none.output;
+  const Outcome resume = run(train() + " --out " + out.string() + " --iterations 80 --threads 2 --resume --effects distractors");
+  EXPECT_EQ(resume.exit_code, 1);
+  EXPECT_NE(resume.output.find("trained with the appearance model but this run has it off"), std::string::npos)
+      << resume.output;
+}
+
 // A scene with ground-truth masks: metrics.json scores every training view's distractor mask.
 TEST_F(TrainApp, MetricsScoreDistractorMasksWhenTheSceneHasThem) {
   synth::GenerateOptions g;

@@ -14,15 +14,7 @@ namespace desplat::test {
 namespace {
 
 TrainConfig short_config(int64_t iterations) {
-  TrainConfig c;
-  c.iterations = iterations;
-  c.sh_degree = 1;
-  c.sh_degree_interval = 100;
-  c.resolution_schedule = 100;  // factor 4, 2, then 1 after step 200
-  c.densify.warmup = 100;
-  c.densify.refine_every = 50;
-  c.densify.reset_alpha_every = 1000;  // no opacity reset in a short run
-  c.threads = 2;
+  TrainConfig c = short_schedule(iterations);
   // The synthetic views show the evaluation background where nothing is; a random
   // training background would make that flat color content to be painted with opaque
   // Gaussians (real captures have no empty background, so training keeps it on).

@@ -73,6 +73,7 @@ void GaussianSet::resize(size_t n) {
   for (size_t i = old; i < n; ++i) quats[4 * i] = 1.0f;
   opacity_logits.resize(n, 0.0f);
   colors.resize(view().color_floats_per_gaussian() * n, 0.0f);
+  features.resize(size_t(feature_dim) * n, 0.0f);
 }
 
 }  // namespace desplat

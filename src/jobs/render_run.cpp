@@ -5,6 +5,8 @@
 #include "desplat/jobs/model_folder.hpp"
 
 #include <fstream>
+#include <algorithm>
+#include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -70,6 +72,27 @@ int run_render(const RenderRunOptions& o) {
   const std::vector<std::string> buffer_views = distractor_views_in_checkpoint(ckpt);
   for (size_t b = 0; b < buffer_views.size(); ++b) buffer_of[buffer_views[b]] = b;
 
+  // --appearance: the chosen training photo's embedding recolours the static layer.
+  AppearanceModel look;
+  std::vector<float> embedding;
+  if (!o.appearance.empty()) {
+    const std::vector<std::string> look_views = appearance_views_in_checkpoint(ckpt);
+    if (look_views.empty())
+      throw std::invalid_argument("--appearance: " + o.model_dir.string() +
+                                  " was trained without an appearance model (train with --effects …,appearance)");
+    const auto at = std::find(look_views.begin(), look_views.end(), o.appearance);
+    if (at == look_views.end())
+      throw std::invalid_argument("--appearance: '" + o.appearance + "' is not a training view of " +
+                                  o.model_dir.string() + " (only training photos have an appearance)");
+    look = appearance_from_checkpoint(ckpt);
+    const std::span<const float> e = look.embedding(size_t(at - look_views.begin()));
+    embedding.assign(e.begin(), e.end());
+  }
+  AppearancePass look_pass;
+  std::function<void(RasterOutput&)> recolor;
+  if (!embedding.empty())
+    recolor = [&](RasterOutput& fw) { look_pass.forward(look, embedding, statics, fw, o.threads); };
+
   const std::vector<size_t> chosen = choose_views(scene, o.views, data_dir);
   const bool wants_distractors = o.layer != "static" || o.mask || o.figure;
   for (size_t i : chosen) {
@@ -94,7 +117,9 @@ int run_render(const RenderRunOptions& o) {
     GaussianSet distractors;
     if (buffer != buffer_of.end()) distractors = distractors_from_checkpoint(ckpt, buffer->second);
     const GaussianSet* d = buffer != buffer_of.end() ? &distractors : nullptr;
-    auto render = [&](const std::array<float, 3>& bg) { return render_view_layers(statics, d, view.camera, rs, bg); };
+    auto render = [&](const std::array<float, 3>& bg) {
+      return render_view_layers(statics, d, view.camera, rs, bg, recolor);
+    };
     // With --alpha the layer over black is its premultiplied color; otherwise it is shown over
     // the evaluation background. The mask does not depend on the background.
     const ViewLayers layers = render(o.alpha ? std::array<float, 3>{0, 0, 0} : train.eval_background);

@@ -21,6 +21,7 @@
 #include "desplat/eval/mask_metrics.hpp"
 #include "desplat/io/ply.hpp"
 #include "desplat/sfm/sfm.hpp"
+#include "desplat/train/effects.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/train/training_checkpoint.hpp"
@@ -88,13 +89,17 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   json per = json::array();
   double psnr_sum = 0, ssim_sum = 0;
   for (const ViewMetrics& v : m) {
-    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}});
+    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}, {"protocol", to_string(v.protocol)}});
     psnr_sum += v.psnr, ssim_sum += v.ssim;
   }
   // Without test views there is no mean: null, not a PSNR of 0.
   if (m.empty()) return {{"views", per}, {"mean_psnr", nullptr}, {"mean_ssim", nullptr}, {"count", 0}};
   const double n = double(m.size());
-  return {{"views", per}, {"mean_psnr", psnr_sum / n}, {"mean_ssim", ssim_sum / n}, {"count", m.size()}};
+  return {{"views", per},
+          {"mean_psnr", psnr_sum / n},
+          {"mean_ssim", ssim_sum / n},
+          {"count", m.size()},
+          {"protocol", to_string(m.front().protocol)}};
 }
 
 // Distractor-mask quality against the scene's ground truth; null without masks.
@@ -281,7 +286,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.seed) config.seed = *opt.seed;
   if (opt.threads) config.threads = *opt.threads;
   if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
+  if (opt.static_only && opt.effects && *opt.effects != "none")
+    throw std::invalid_argument("--static-only and --effects " + *opt.effects + " contradict each other");
   if (opt.static_only) config.distractors.enabled = false;
+  if (opt.effects) Effects::parse(*opt.effects).apply(config);
   if (opt.distractors_per_view) {
     config.distractors.initial_count = *opt.distractors_per_view;
     config.distractors.reference_pixels = 0;  // exactly that many, whatever the image size
@@ -330,7 +338,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
                 (long long)full_resolution_from, (long long)config.iterations);
 
-  const json run_json = {{"static_only", opt.static_only}, {"preset", opt.preset}};
+  if (config.appearance.enabled)
+    std::printf("appearance model: embeddings of %d per training image and %d per Gaussian, MLP %d x %d; test views are "
+                "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps; scored on the right)\n",
+                config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
+                config.appearance.hidden_width, config.appearance.test_steps);
+  const json run_json = {
+      {"static_only", opt.static_only}, {"preset", opt.preset}, {"effects", Effects::of(config).to_string()}};
   Trainer trainer(data, config);
   // The trainer's configuration is the effective one (e.g. a static-only model keeps every
   // sparse point): that is what config.json records.
@@ -350,7 +364,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   json history = json::array();
   const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
                                      [](const SceneView& v) { return !v.mask_path.empty(); });
-  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_total, dist_share;
+  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_look, t_total, dist_share;
   std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
@@ -373,6 +387,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       t_fwd.push_back(s.timings.forward), t_bwd.push_back(s.timings.backward);
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
       t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
+      t_look.push_back(s.timings.appearance);
       dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
       const double n_pairs = double(std::max<int64_t>(1, s.static_pairs));
       pairs.push_back(double(s.static_pairs));
@@ -415,7 +430,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const std::vector<ViewMetrics> final_metrics = trainer.evaluate(data.test);
   for (const TrainView& v : data.test) {
     fs::path name = fs::path(v.name).replace_extension(".png");
-    const FloatImage render = trainer.render(v.camera, config.eval_background);
+    // An appearance model's test view in the look fitted on its left half.
+    const auto scored = std::find_if(final_metrics.begin(), final_metrics.end(),
+                                     [&](const ViewMetrics& m) { return m.name == v.name; });
+    const FloatImage render = trainer.render(v.camera, config.eval_background,
+                                             scored != final_metrics.end() ? scored->embedding : std::vector<float>{});
     write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&v.image, &render}));
   }
   // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
@@ -445,6 +464,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"loss", median(t_loss)},
                                                      {"optimizer_and_density", median(t_opt)},
                                                      {"distractor_branch", median(t_dist)},
+                                                     {"appearance", median(t_look)},
                                                      {"total", median(t_total)},
                                                      {"distractor_share", median(dist_share)},
                                                      {"steps_measured", t_fwd.size()},

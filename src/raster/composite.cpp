@@ -97,10 +97,13 @@ FloatImage composite_over_background(const RasterOutput& r, const std::array<flo
 }
 
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
-                              const RasterSettings& settings, const std::array<float, 3>& bg) {
+                              const RasterSettings& settings, const std::array<float, 3>& bg,
+                              const std::function<void(RasterOutput&)>& recolor_statics) {
   const size_t pixels = size_t(camera.width) * camera.height;
   RasterOutput s, d;
-  rasterize_forward(statics.view(), camera, settings, s);
+  rasterize_project(statics.view(), camera, settings, s);
+  if (recolor_statics) recolor_statics(s);
+  rasterize_blend(camera, settings, s);
   const bool with_d = distractors != nullptr && distractors->size() > 0;
   if (with_d) rasterize_forward(distractors->view(), camera, settings, d);
   const Layer ls{s.color, s.alpha};

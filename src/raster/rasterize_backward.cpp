@@ -121,7 +121,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
 void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
                         const RasterOutput& fw, std::span<const float> dL_dcolor,
                         std::span<const float> dL_dalpha, std::span<const float> dL_ddepth,
-                        RasterGradients& grads) {
+                        RasterGradients& grads, std::span<const float> rgb_scale) {
   g.validate();
   cam.validate();
   const size_t n = g.size();
@@ -136,6 +136,7 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   check(dL_dcolor, 3 * pixels, "dL_dcolor");
   check(dL_dalpha, pixels, "dL_dalpha");
   check(dL_ddepth, pixels, "dL_ddepth");
+  check(rgb_scale, 3 * n, "rgb_scale");
 
   const int color_stride = g.color_floats_per_gaussian();
   grads.means.assign(3 * n, 0.0f);
@@ -145,6 +146,7 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   grads.colors.assign(color_stride * n, 0.0f);
   grads.means2d.assign(2 * n, 0.0f);
   grads.absgrad.assign(n, 0.0f);
+  grads.rgb.assign(3 * n, 0.0f);
 
   const TileGrid grid(cam.width, cam.height);
   grads.entry_scratch.resize(fw.tile_entries.size() * kEntrySlots);
@@ -180,9 +182,14 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
     const float o = fw.opacity[i];
     grads.opacity_logits[i] = sum[kO] * o * (1.0f - o);
 
-    // Color: the clamp passes the gradient only where it was inactive.
+    // Color: the caller's change of the colour (rgb_scale), then the clamp, which passes the
+    // gradient only where it was inactive.
     Vec3<float> d_rgb;
-    for (int ch = 0; ch < 3; ++ch) d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : sum[kR + ch];
+    for (int ch = 0; ch < 3; ++ch) {
+      grads.rgb[3 * i + ch] = sum[kR + ch];
+      const float scaled = rgb_scale.empty() ? sum[kR + ch] : rgb_scale[3 * i + ch] * sum[kR + ch];
+      d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : scaled;
+    }
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     Vec3<float> d_mean = Vec3<float>::Zero();
     float* d_colors = &grads.colors[color_stride * i];

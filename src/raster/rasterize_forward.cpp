@@ -232,21 +232,13 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
 
 }  // namespace
 
-void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
-                       RasterOutput& out) {
+void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSettings& s, RasterOutput& out) {
   g.validate();
   cam.validate();
   const int sh_degree = effective_sh_degree(g, s);
   const size_t n = g.size();
-  const size_t pixels = size_t(cam.width) * cam.height;
-
   out.width = cam.width;
   out.height = cam.height;
-  out.color.assign(3 * pixels, 0.0f);
-  out.alpha.assign(pixels, 0.0f);
-  out.depth.assign(pixels, 0.0f);
-  out.final_transmittance.assign(pixels, 1.0f);
-  out.last_contributor.assign(pixels, -1);
   out.means2d.assign(2 * n, 0.0f);
   out.conics.assign(3 * n, 0.0f);
   out.radii.assign(2 * n, 0);
@@ -256,8 +248,18 @@ void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSet
   out.opacity.assign(n, 0.0f);
   out.color_clamped.assign(3 * n, 0);
   out.blend_radii.assign(2 * n, 0);
-
   preprocess(g, cam, s, sh_degree, out);
+}
+
+void rasterize_blend(const Camera& cam, const RasterSettings& s, RasterOutput& out) {
+  if (out.width != cam.width || out.height != cam.height)
+    throw std::invalid_argument("rasterize_blend: the projection was made for another image size");
+  const size_t pixels = size_t(cam.width) * cam.height;
+  out.color.assign(3 * pixels, 0.0f);
+  out.alpha.assign(pixels, 0.0f);
+  out.depth.assign(pixels, 0.0f);
+  out.final_transmittance.assign(pixels, 1.0f);
+  out.last_contributor.assign(pixels, -1);
   const TileGrid grid(cam.width, cam.height);
   bin_gaussians(grid, thread_count(s), out);
 
@@ -265,6 +267,11 @@ void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSet
 #pragma omp parallel for num_threads(thread_count(s)) schedule(dynamic, 1) reduction(+ : evaluated)
   for (int tile = 0; tile < grid.count(); ++tile) evaluated += blend_tile(grid, tile, out);
   out.evaluated_pairs = evaluated;
+}
+
+void rasterize_forward(const GaussianView& g, const Camera& cam, const RasterSettings& s, RasterOutput& out) {
+  rasterize_project(g, cam, s, out);
+  rasterize_blend(cam, s, out);
 }
 
 }  // namespace desplat

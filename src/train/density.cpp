@@ -20,18 +20,22 @@ template <typename T> void append_row(std::vector<T>& dst, const std::vector<T>&
 
 }  // namespace
 
-GaussianSet copy_rows(const GaussianSet& g, const std::vector<uint8_t>& mask) {
+namespace {
+// An empty set with g's layout (colour mode, SH degree, feature size).
+GaussianSet empty_like(const GaussianSet& g) {
   GaussianSet out;
   out.color_mode = g.color_mode;
   out.sh_degree = g.sh_degree;
-  const int cs = g.view().color_floats_per_gaussian();
+  out.feature_dim = g.feature_dim;
+  return out;
+}
+}  // namespace
+
+GaussianSet copy_rows(const GaussianSet& g, const std::vector<uint8_t>& mask) {
+  GaussianSet out = empty_like(g);
   for (size_t i = 0; i < g.size(); ++i) {
     if (!mask[i]) continue;
-    append_row(out.means, g.means, i, 3);
-    append_row(out.log_scales, g.log_scales, i, 3);
-    append_row(out.quats, g.quats, i, 4);
-    append_row(out.opacity_logits, g.opacity_logits, i, 1);
-    append_row(out.colors, g.colors, i, cs);
+    for (const ParamGroupInfo& info : kParamGroupTable) append_row(out.*info.values, g.*info.values, i, group_width(info, g));
   }
   return out;
 }
@@ -43,9 +47,7 @@ GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask
                           std::mt19937_64& rng) {
   const GaussianSet base = copy_rows(g, mask);
   std::normal_distribution<float> normal(0.0f, 1.0f);
-  GaussianSet out;
-  out.color_mode = g.color_mode;
-  out.sh_degree = g.sh_degree;
+  GaussianSet out = empty_like(g);
   const float log_factor = std::log(scale_factor);
   for (int s = 0; s < samples; ++s) {
     GaussianSet copy = base;
@@ -62,10 +64,8 @@ GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask
         copy.log_scales[3 * i + k] -= log_factor;
       }
     }
-    for (auto [dst, src] : {std::pair{&out.means, &copy.means}, std::pair{&out.log_scales, &copy.log_scales},
-                            std::pair{&out.quats, &copy.quats}, std::pair{&out.opacity_logits, &copy.opacity_logits},
-                            std::pair{&out.colors, &copy.colors}})
-      dst->insert(dst->end(), src->begin(), src->end());
+    for (const ParamGroupInfo& info : kParamGroupTable)
+      (out.*info.values).insert((out.*info.values).end(), (copy.*info.values).begin(), (copy.*info.values).end());
   }
   return out;
 }

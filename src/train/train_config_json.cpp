@@ -82,6 +82,16 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
       {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
       {"distractors.grow_after", &c.distractors.grow_after},
+      {"appearance.enabled", &c.appearance.enabled},
+      {"appearance.image_dim", &c.appearance.image_dim},
+      {"appearance.fourier_frequencies", &c.appearance.fourier_frequencies},
+      {"appearance.hidden_width", &c.appearance.hidden_width},
+      {"appearance.hidden_layers", &c.appearance.hidden_layers},
+      {"appearance.lr.mlp", &c.appearance.lr_mlp},
+      {"appearance.lr.image_embeddings", &c.appearance.lr_image},
+      {"appearance.lr.gaussian_embeddings", &c.lr.features},
+      {"appearance.test_steps", &c.appearance.test_steps},
+      {"appearance.test_lr", &c.appearance.test_lr},
       {"init.transient_points", &c.transient_points.action},
       {"init.transient_min_track_images", &c.transient_points.min_track_images},
       {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
@@ -145,6 +155,12 @@ void validate_config(const TrainConfig& c) {
   require("distractors.refine_every_epochs", c.distractors.refine_every_epochs, 1, kBig, false, "at least 1");
   require("distractors.pixels_per_distractor", c.distractors.pixels_per_distractor, 0, kBig, false, "≥ 0");
   require("distractors.grow_after", c.distractors.grow_after, 0, kBig, false, "≥ 0");
+  require("appearance.image_dim", c.appearance.image_dim, 1, 4096, false, "1..4096");
+  require("appearance.fourier_frequencies", c.appearance.fourier_frequencies, 1, 16, false, "1..16");
+  require("appearance.hidden_width", c.appearance.hidden_width, 1, 4096, false, "1..4096");
+  require("appearance.hidden_layers", c.appearance.hidden_layers, 1, 16, false, "1..16");
+  require("appearance.test_steps", c.appearance.test_steps, 1, 1e6, false, "1..1,000,000");
+  require("appearance.test_lr", c.appearance.test_lr, 0, kBig, true, "> 0");
   require("init.transient_min_track_images", c.transient_points.min_track_images, 0, kBig, false, "≥ 0");
   require("random_init_points", c.random_init_points, 1, 1e8, false, "1..100,000,000");
   require("threads", c.threads, 0, 4096, false, "0 (all cores) or a positive count");
@@ -157,7 +173,9 @@ void validate_config(const TrainConfig& c) {
       {"distractors.lr.means", c.distractors.lr.means}, {"distractors.lr.log_scales", c.distractors.lr.log_scales},
       {"distractors.lr.quats", c.distractors.lr.quats},
       {"distractors.lr.opacity_logits", c.distractors.lr.opacity_logits},
-      {"distractors.lr.rgb", c.distractors.lr.colors_dc}};
+      {"distractors.lr.rgb", c.distractors.lr.colors_dc},
+      {"appearance.lr.mlp", c.appearance.lr_mlp}, {"appearance.lr.image_embeddings", c.appearance.lr_image},
+      {"appearance.lr.gaussian_embeddings", c.lr.features}};
   for (const auto& [name, rate] : rates) require(name, rate, 0, kBig, false, "≥ 0 (0 freezes the group)");
   // Weights, thresholds and sizes.
   require("ssim_lambda", c.ssim_lambda, 0, 1, false, "in [0, 1]");

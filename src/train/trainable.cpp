@@ -45,8 +45,9 @@ void TrainableGaussians::keep(const std::vector<uint8_t>& keep_mask) {
 }
 
 void TrainableGaussians::append(const GaussianSet& extra) {
-  if (extra.color_mode != params.color_mode || extra.sh_degree != params.sh_degree)
-    throw std::logic_error("append: color layout differs");
+  if (extra.color_mode != params.color_mode || extra.sh_degree != params.sh_degree ||
+      extra.feature_dim != params.feature_dim)
+    throw std::logic_error("append: color or feature layout differs");
   for (int g = 0; g < kParamGroups; ++g) {
     const std::vector<float>& src = extra.*kParamGroupTable[g].values;
     std::vector<float>& dst = param(ParamGroup(g));
@@ -114,10 +115,8 @@ float TrainableGaussians::mean_gradient(size_t i, const StatisticsRules& rules, 
   return rules.normalize_each_step ? mean : mean * 0.5f * float(image_size);
 }
 
-namespace {
-// PyTorch's Adam on n contiguous values with one step size (= rate / bias correction 1).
-// Returns whether any value, first or second moment ended non-finite. Elementwise and
-// branch-free, so it vectorizes; the arithmetic is the same expression for every value.
+// Elementwise and branch-free, so it vectorizes; the arithmetic is the same expression for
+// every value.
 bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float step_size, float sqrt_bc2,
                const AdamSettings& a) {
   int bad = 0;
@@ -132,6 +131,7 @@ bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float ste
   return bad != 0;
 }
 
+namespace {
 bool row_finite(const float* p, const float* m, const float* v, int width) {
   for (int k = 0; k < width; ++k)
     if (!(std::isfinite(p[k]) && std::isfinite(m[k]) && std::isfinite(v[k]))) return false;

@@ -117,7 +117,14 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     transient = transient_points(data_, config_.transient_points);
     for (const uint8_t t : transient) transient_point_count += t;
   }
-  gaussians_ = TrainableGaussians(initial_gaussians(data_, config_, rng_, transient));
+  GaussianSet initial = initial_gaussians(data_, config_, rng_, transient);
+  if (config_.appearance.enabled) {
+    // docs/METHOD.md §10: z_i starts as Fourier features of the Gaussian's position.
+    config_.appearance.validate();
+    initial.feature_dim = config_.appearance.feature_dim();
+    initial.features = fourier_features(initial.means, config_.appearance.fourier_frequencies);
+  }
+  gaussians_ = TrainableGaussians(std::move(initial));
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
     for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
@@ -127,6 +134,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     view_composite_unexplained.assign(data_.train.size(), 0.0f);
     view_seed_due.assign(data_.train.size(), 0);
   }
+  if (config_.appearance.enabled) appearance_ = AppearanceModel(config_.appearance, data_.train.size(), rng_());
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
 }
@@ -220,9 +228,12 @@ StepStats Trainer::step() {
   if (config_.distractors.enabled && distractors_[view].size() > 0) distractors = &distractors_[view];
   stats.view_distractors = distractors ? distractors->size() : 0;
   StepProfiler profile;
+  const AppearanceModel* look = config_.appearance.enabled ? &appearance_ : nullptr;
+  const std::span<const float> embedding = look ? appearance_.embedding(size_t(view)) : std::span<const float>();
 
   // 1. Render each layer.
-  profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs); });
+  profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs, look, embedding); });
+  const double appearance_forward = static_pass_.appearance_seconds;
   stats.static_pairs = static_pass_.forward.evaluated_pairs;
   stats.static_visible = size_t(std::count(static_pass_.forward.visible.begin(), static_pass_.forward.visible.end(), 1));
   if (distractors)
@@ -262,7 +273,19 @@ StepStats Trainer::step() {
   });
 
   // 3. Backward through each layer's rasterization.
-  profile.time(&StepTimings::backward, [&] { static_pass_.backward(gaussians_, cam, rs); });
+  profile.time(&StepTimings::backward, [&] { static_pass_.backward(gaussians_, cam, rs, look, embedding); });
+  // The appearance model's share of the static passes is reported on its own.
+  profile.timings.forward -= appearance_forward;
+  profile.timings.backward -= static_pass_.appearance_seconds - appearance_forward;
+  profile.timings.appearance += static_pass_.appearance_seconds;
+  if (look)
+    profile.time(&StepTimings::appearance, [&] {
+      const size_t dim = size_t(config_.appearance.image_dim);
+      d_embeddings_.assign(appearance_.image_embeddings.size(), 0.0f);
+      std::copy_n(static_pass_.appearance.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
+      if (!appearance_.adam_update(static_pass_.appearance.d_mlp, d_embeddings_))
+        warn("step " + std::to_string(step_) + ": the appearance model's gradient is not finite; its update was skipped");
+    });
   if (distractors)
     profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
 
@@ -418,23 +441,89 @@ int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std
   return bad;
 }
 
-FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background) const {
-  RasterOutput out;
-  rasterize_forward(gaussians_.params.view(), camera, raster_settings(), out);
-  return composite_over_background(out, background);
+FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background,
+                           std::span<const float> embedding) const {
+  LayerPass pass;
+  const bool look = config_.appearance.enabled && !embedding.empty();
+  pass.render(gaussians_, camera, raster_settings(), look ? &appearance_ : nullptr, embedding);
+  return composite_over_background(pass.forward, background);
+}
+
+const char* to_string(EvalProtocol p) {
+  return p == EvalProtocol::appearance_halves ? "appearance fitted on the left half, scored on the right half"
+                                               : "full image";
+}
+
+std::vector<float> Trainer::fit_embedding(const TrainView& view, std::span<const float> fit) const {
+  const AppearanceSettings& as = config_.appearance;
+  if (!as.enabled) throw std::invalid_argument("fit_embedding: this model has no appearance model");
+  const Camera& cam = view.camera;
+  const size_t pixels = size_t(cam.width) * cam.height, dim = size_t(as.image_dim);
+  if (fit.size() != pixels) throw std::invalid_argument("fit_embedding: the fit mask does not match view " + view.name);
+  std::vector<float> keep(fit.begin(), fit.end());
+  if (!view.keep.empty())
+    for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
+  // Start from the mean training appearance.
+  std::vector<float> e(dim, 0.0f), m(dim, 0.0f), v(dim, 0.0f);
+  for (size_t j = 0; j < appearance_.views(); ++j)
+    for (size_t k = 0; k < dim; ++k) e[k] += appearance_.embedding(j)[k] / float(appearance_.views());
+  const RasterSettings rs = raster_settings();
+  const AdamSettings adam;
+  LayerPass pass;
+  std::vector<float> composite(3 * pixels), d_composite(3 * pixels);
+  for (int step = 1; step <= as.test_steps; ++step) {
+    pass.render(gaussians_, cam, rs, &appearance_, e);
+    composite_layers(pass.layer(), Layer{}, config_.eval_background, composite);
+    photometric_loss(composite, view.image.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite, keep);
+    pass.d_color.resize(3 * pixels);
+    pass.d_alpha.resize(pixels);
+    composite_layers_backward(pass.layer(), Layer{}, config_.eval_background, d_composite,
+                              {pass.d_color, pass.d_alpha, {}, {}});
+    pass.backward(gaussians_, cam, rs, &appearance_, e);
+    const std::vector<float>& grad = pass.appearance.d_embedding;
+    if (!std::all_of(grad.begin(), grad.end(), [](float g) { return std::isfinite(g); })) break;
+    const double bc1 = 1.0 - std::pow(double(adam.beta1), step);
+    const float sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
+    adam_span(e.data(), m.data(), v.data(), grad.data(), dim, float(as.test_lr / bc1), sqrt_bc2, adam);
+  }
+  return e;
 }
 
 ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>& background) const {
   const GaussianSet* d = distractors_.empty() ? nullptr : &distractors_.at(train_view).params;
-  return render_view_layers(gaussians_.params, d, data_.train.at(train_view).camera, raster_settings(), background);
+  std::function<void(RasterOutput&)> recolor;
+  AppearancePass pass;
+  if (config_.appearance.enabled)  // the static layer in this photo's appearance
+    recolor = [&](RasterOutput& fw) {
+      pass.forward(appearance_, appearance_.embedding(train_view), gaussians_.params, fw, config_.threads);
+    };
+  return render_view_layers(gaussians_.params, d, data_.train.at(train_view).camera, raster_settings(), background,
+                            recolor);
 }
 
 std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
   std::vector<ViewMetrics> out;
   for (const TrainView& v : views) {
-    const FloatImage img = render(v.camera, config_.eval_background);
-    out.push_back({v.name, psnr(img.pixels, v.image.pixels, v.keep),
-                   ssim(img.pixels, v.image.pixels, img.width, img.height, v.keep)});
+    if (!config_.appearance.enabled) {
+      const FloatImage img = render(v.camera, config_.eval_background);
+      out.push_back({v.name, psnr(img.pixels, v.image.pixels, v.keep),
+                     ssim(img.pixels, v.image.pixels, img.width, img.height, v.keep), EvalProtocol::full_image, {}});
+      continue;
+    }
+    // Photo Tourism: fit on the left half, score the right half (and the view's own mask).
+    const int w = v.camera.width, h = v.camera.height;
+    std::vector<float> left(size_t(w) * h, 0.0f), right(size_t(w) * h, 0.0f);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const size_t p = size_t(y) * w + x;
+        const float keep = v.keep.empty() ? 1.0f : v.keep[p];
+        (x < w / 2 ? left : right)[p] = keep;
+      }
+    ViewMetrics m{v.name, 0, 0, EvalProtocol::appearance_halves, fit_embedding(v, left)};
+    const FloatImage img = render(v.camera, config_.eval_background, m.embedding);
+    m.psnr = psnr(img.pixels, v.image.pixels, right);
+    m.ssim = ssim(img.pixels, v.image.pixels, w, h, right);
+    out.push_back(std::move(m));
   }
   return out;
 }

@@ -2,7 +2,10 @@
 // "P/<group>", "P/adam_m/<group>", "P/adam_v/<group>", "P/stats/<name>"; and
 // "trainer/view_order", and per training view (distractors on) "trainer/view_static_unexplained",
 // "trainer/view_composite_unexplained", "trainer/view_seed_due". Per-set scalars (Adam step, statistics flag) are in the metadata:
-// "adam_step"/"statistics_empty" for the static set, "distractors": {"views": [names],
+// "adam_step"/"statistics_empty"/"feature_dim" for the static set, and with the appearance model
+// "appearance/mlp", "appearance/image_embeddings" and their "appearance/adam_m/…", "…/adam_v/…"
+// with metadata "appearance": {"views", "image_dim", "fourier_frequencies", "hidden_width",
+// "hidden_layers", "adam_step"}; "distractors": {"views": [names],
 // "adam_step": [...], "statistics_empty": [...]} for the per-view sets.
 #include "desplat/train/training_checkpoint.hpp"
 
@@ -25,21 +28,35 @@ void put_trainable(Checkpoint& c, const std::string& prefix, const TrainableGaus
   c.put(prefix + "/stats/max_screen_radius", {n}, g.max_screen_radius);
 }
 
-GaussianSet get_params(const Checkpoint& c, const std::string& prefix, ColorMode mode, int sh_degree) {
+// A group the checkpoint may lack: features, in checkpoints from before the appearance model
+// (always of width 0 there).
+bool absent_featureless(const Checkpoint& c, const std::string& name, const ParamGroupInfo& info, const GaussianSet& g) {
+  return info.id == ParamGroup::Features && g.feature_dim == 0 && !c.contains(name);
+}
+
+GaussianSet get_params(const Checkpoint& c, const std::string& prefix, ColorMode mode, int sh_degree, int feature_dim) {
   GaussianSet g;
   g.sh_degree = sh_degree;
   g.color_mode = mode;
+  g.feature_dim = feature_dim;
   const uint64_t n = c.array(prefix + "/opacity_logits").shape().at(0);
-  for (const ParamGroupInfo& info : kParamGroupTable)
-    g.*info.values = c.get<float>(prefix + "/" + info.name, {n, uint64_t(group_width(info, g))});
+  for (const ParamGroupInfo& info : kParamGroupTable) {
+    const std::string name = prefix + "/" + info.name;
+    if (absent_featureless(c, name, info, g)) continue;
+    g.*info.values = c.get<float>(name, {n, uint64_t(group_width(info, g))});
+  }
   return g;
 }
 
 void get_trainable(const Checkpoint& c, const std::string& prefix, TrainableGaussians& g) {
-  g.params = get_params(c, prefix, g.params.color_mode, g.params.sh_degree);
+  g.params = get_params(c, prefix, g.params.color_mode, g.params.sh_degree, g.params.feature_dim);
   const uint64_t n = g.size();
   for (int k = 0; k < kParamGroups; ++k) {
     const uint64_t stride = g.floats_per_gaussian(ParamGroup(k));
+    if (absent_featureless(c, prefix + "/adam_m/" + kParamGroupTable[k].name, kParamGroupTable[k], g.params)) {
+      g.adam_m[k].clear(), g.adam_v[k].clear();
+      continue;
+    }
     g.adam_m[k] = c.get<float>(prefix + "/adam_m/" + kParamGroupTable[k].name, {n, stride});
     g.adam_v[k] = c.get<float>(prefix + "/adam_v/" + kParamGroupTable[k].name, {n, stride});
   }
@@ -60,6 +77,26 @@ Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extr
   c.metadata["statistics_empty"] = g.statistics_empty;
   c.metadata["sh_degree"] = g.params.sh_degree;
   c.metadata["color_mode"] = g.params.color_mode == ColorMode::RGB ? "rgb" : "sh";
+  c.metadata["feature_dim"] = g.params.feature_dim;
+  const AppearanceModel& look = t.appearance();
+  if (t.config().appearance.enabled) {
+    nlohmann::json names = nlohmann::json::array();
+    for (const TrainView& v : t.data().train) names.push_back(v.name);
+    const AppearanceSettings& as = look.settings;
+    c.metadata["appearance"] = {{"views", names},
+                                {"image_dim", as.image_dim},
+                                {"fourier_frequencies", as.fourier_frequencies},
+                                {"hidden_width", as.hidden_width},
+                                {"hidden_layers", as.hidden_layers},
+                                {"adam_step", look.adam_step}};
+    const uint64_t views = look.views(), dim = uint64_t(as.image_dim), weights = look.mlp.size();
+    c.put("appearance/mlp", {weights}, look.mlp);
+    c.put("appearance/adam_m/mlp", {weights}, look.mlp_m);
+    c.put("appearance/adam_v/mlp", {weights}, look.mlp_v);
+    c.put("appearance/image_embeddings", {views, dim}, look.image_embeddings);
+    c.put("appearance/adam_m/image_embeddings", {views, dim}, look.embed_m);
+    c.put("appearance/adam_v/image_embeddings", {views, dim}, look.embed_v);
+  }
   c.metadata["view_order_pos"] = t.view_order_pos;
   c.metadata["rng"] = save_rng_state(t.rng());
   put_trainable(c, "static", g);
@@ -86,7 +123,35 @@ GaussianSet gaussians_from_checkpoint(const Checkpoint& c) {
   const int sh_degree = c.metadata.value("sh_degree", 0);
   const ColorMode mode =
       c.metadata.value("color_mode", std::string("sh")) == "rgb" ? ColorMode::RGB : ColorMode::SphericalHarmonics;
-  return get_params(c, "static", mode, sh_degree);
+  return get_params(c, "static", mode, sh_degree, c.metadata.value("feature_dim", 0));
+}
+
+std::vector<std::string> appearance_views_in_checkpoint(const Checkpoint& c) {
+  if (!c.metadata.contains("appearance")) return {};
+  return c.metadata.at("appearance").at("views").get<std::vector<std::string>>();
+}
+
+AppearanceModel appearance_from_checkpoint(const Checkpoint& c) {
+  const std::vector<std::string> views = appearance_views_in_checkpoint(c);
+  if (views.empty()) throw CheckpointError(c.source.string() + ": the model was trained without appearance");
+  const nlohmann::json& m = c.metadata.at("appearance");
+  AppearanceSettings s;
+  s.enabled = true;
+  s.image_dim = m.at("image_dim").get<int>();
+  s.fourier_frequencies = m.at("fourier_frequencies").get<int>();
+  s.hidden_width = m.at("hidden_width").get<int>();
+  s.hidden_layers = m.at("hidden_layers").get<int>();
+  AppearanceModel model;
+  model.settings = s;
+  const uint64_t weights = model.mlp_floats(), dim = uint64_t(s.image_dim);
+  model.mlp = c.get<float>("appearance/mlp", {weights});
+  model.mlp_m = c.get<float>("appearance/adam_m/mlp", {weights});
+  model.mlp_v = c.get<float>("appearance/adam_v/mlp", {weights});
+  model.image_embeddings = c.get<float>("appearance/image_embeddings", {views.size(), dim});
+  model.embed_m = c.get<float>("appearance/adam_m/image_embeddings", {views.size(), dim});
+  model.embed_v = c.get<float>("appearance/adam_v/image_embeddings", {views.size(), dim});
+  model.adam_step = m.at("adam_step").get<int64_t>();
+  return model;
 }
 
 std::vector<std::string> distractor_views_in_checkpoint(const Checkpoint& c) {
@@ -95,7 +160,7 @@ std::vector<std::string> distractor_views_in_checkpoint(const Checkpoint& c) {
 }
 
 GaussianSet distractors_from_checkpoint(const Checkpoint& c, size_t index) {
-  return get_params(c, distractor_prefix(index), ColorMode::RGB, 0);
+  return get_params(c, distractor_prefix(index), ColorMode::RGB, 0, 0);
 }
 
 void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
@@ -115,6 +180,31 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
       throw CheckpointError(c.source.string() + ": distractor buffer " + std::to_string(v) + " belongs to view '" +
                             views[v] + "' but this run's training view " + std::to_string(v) + " is '" +
                             trainer.data().train[v].name + "' (another scene or split?)");
+  // The appearance model: on in both or off in both, with the same sizes.
+  const bool ckpt_look = c.metadata.contains("appearance"), run_look = trainer.config().appearance.enabled;
+  if (ckpt_look != run_look)
+    throw CheckpointError(c.source.string() + ": the checkpoint was trained " + (ckpt_look ? "with" : "without") +
+                          " the appearance model but this run has it " + (run_look ? "on" : "off") +
+                          " (--effects must match the run being resumed)");
+  if (run_look) {
+    AppearanceModel look = appearance_from_checkpoint(c);
+    const AppearanceSettings& want = trainer.config().appearance;
+    const AppearanceSettings& got = look.settings;
+    if (got.image_dim != want.image_dim || got.fourier_frequencies != want.fourier_frequencies ||
+        got.hidden_width != want.hidden_width || got.hidden_layers != want.hidden_layers)
+      throw CheckpointError(c.source.string() + ": the checkpoint's appearance model has embeddings of " +
+                            std::to_string(got.image_dim) + " (image) and " + std::to_string(got.feature_dim()) +
+                            " (Gaussian) and " + std::to_string(got.hidden_layers) + " hidden layers of " +
+                            std::to_string(got.hidden_width) + "; this run asks for " + std::to_string(want.image_dim) +
+                            ", " + std::to_string(want.feature_dim()) + ", " + std::to_string(want.hidden_layers) +
+                            " of " + std::to_string(want.hidden_width));
+    if (appearance_views_in_checkpoint(c).size() != trainer.data().train.size())
+      throw CheckpointError(c.source.string() + ": the checkpoint's appearance model has embeddings for " +
+                            std::to_string(appearance_views_in_checkpoint(c).size()) + " training views, this run has " +
+                            std::to_string(trainer.data().train.size()));
+    look.settings = want;  // rates and test-time settings are the run's
+    trainer.mutable_appearance() = std::move(look);
+  }
   get_trainable(c, "static", g);
   g.adam_step = c.metadata.at("adam_step").get<int64_t>();
   g.statistics_empty = c.metadata.at("statistics_empty").get<bool>();

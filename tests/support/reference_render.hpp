@@ -20,12 +20,14 @@ namespace desplat::test {
 
 template <typename T> struct RefGaussians {
   std::vector<T> means, log_scales, quats, opacity_logits, colors;
+  std::vector<T> features;  // the appearance features; the render never reads them
   ColorMode color_mode = ColorMode::SphericalHarmonics;
   int sh_degree = 0;
   size_t size() const { return opacity_logits.size(); }
   // The array of a parameter group (the table's order, desplat/train/param_groups.hpp).
   std::vector<T>& array(ParamGroup g) {
-    std::vector<T>* arrays[kParamGroups] = {&means, &log_scales, &quats, &opacity_logits, &colors};
+    std::vector<T>* arrays[kParamGroups] = {&means, &log_scales, &quats, &opacity_logits, &colors, &features};
+    static_assert(kParamGroups == 6, "a new parameter group needs its array here");
     return *arrays[static_cast<int>(g)];
   }
 };

@@ -80,4 +80,20 @@ inline TrainingData synthetic_training_data(int views, int width, int height, un
   return data;
 }
 
+// The schedule of a short training test on these views: SH degree 1 after 100 steps,
+// factor 4, 2, then 1 after step 200, refinements every 50 steps from step 100, no opacity
+// reset, 2 threads. Everything else is TrainConfig's default.
+inline TrainConfig short_schedule(int64_t iterations) {
+  TrainConfig c;
+  c.iterations = iterations;
+  c.sh_degree = 1;
+  c.sh_degree_interval = 100;
+  c.resolution_schedule = 100;
+  c.densify.warmup = 100;
+  c.densify.refine_every = 50;
+  c.densify.reset_alpha_every = 1000;
+  c.threads = 2;
+  return c;
+}
+
 }  // namespace desplat::test

@@ -12,6 +12,9 @@
 //                             color = max(Σ_k c_k·Y_k(dir) + 0.5, 0),
 //                             dir = normalize(μ − camera center).
 //                   RGB mode: [N, 3], color = clamp(rgb, 0, 1)  (distractor Gaussians).
+//   features        [N, F]  appearance features z (docs/METHOD.md §10), F = feature_dim; F = 0
+//                           when the model has no appearance model. The rasterizer never
+//                           reads them; only GaussianSet holds them (GaussianView does not).
 #pragma once
 
 #include <cstddef>
@@ -49,6 +52,8 @@ struct GaussianSet {
   std::vector<float> means, log_scales, quats, opacity_logits, colors;
   ColorMode color_mode = ColorMode::SphericalHarmonics;
   int sh_degree = 0;
+  std::vector<float> features;  // [N, feature_dim]
+  int feature_dim = 0;
 
   std::size_t size() const { return opacity_logits.size(); }
   // Resizes every array for n Gaussians (new entries zero, quaternions identity).

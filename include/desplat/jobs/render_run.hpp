@@ -18,13 +18,17 @@ struct RenderRunOptions {
   bool mask = false;    // also <name>_mask.png: the distractor mask A_d > 0.5 (training views)
   bool alpha = false;   // write the layer as straight RGBA (alpha = the layer's coverage)
   bool figure = false;  // also <name>_row.png: truth | static | distractor | composite | mask
+  // A training view's name: the static layer in that photo's appearance (models trained with
+  // --effects …,appearance). Empty: the plain colours (what point_cloud.ply holds).
+  std::string appearance;
   int threads = 0;
 };
 
 // Writes <out_dir>/<image name>.png per view (plus the extras asked for) and returns the
 // number of files written. Throws with a clear message for bad input (missing model
 // files, unknown view names, a layer, mask or figure asked of a view that has no
-// distractors or of a static-only model).
+// distractors or of a static-only model, --appearance of a model without one or naming a
+// view that is not a training view).
 int run_render(const RenderRunOptions& options);
 
 }  // namespace desplat

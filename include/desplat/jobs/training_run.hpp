@@ -34,7 +34,8 @@ struct TrainingRunOptions {
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
   std::optional<int> threads;
-  bool static_only = false;  // the Splatfacto baseline: no distractors
+  bool static_only = false;  // the Splatfacto baseline: no distractors (= effects "none")
+  std::optional<std::string> effects;  // train/effects.hpp; unset: the preset's (distractors)
   // Ablation switches (override the config file): distractors.initial_count with
   // reference_pixels = 0 (exactly that many per view), distractors.density_control = false,
   // distractors.regularize = false.

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -67,8 +68,12 @@ struct ViewLayers {
 };
 // `distractors` may be null or empty (test views, culled views): no second pass is made.
 // `statics` is rendered with settings.active_sh_degree; distractors are RGB.
+// `recolor_statics`, when set, is called with the static layer's projection before it is
+// blended and may change the visible Gaussians' colours (RasterOutput::rgb): the appearance
+// model's hook (docs/METHOD.md §10).
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
-                              const RasterSettings& settings, const std::array<float, 3>& background);
+                              const RasterSettings& settings, const std::array<float, 3>& background,
+                              const std::function<void(RasterOutput&)>& recolor_statics = {});
 
 // A pixel is a distractor pixel where A_d exceeds this (docs/METHOD.md §8).
 constexpr float kDistractorMaskThreshold = 0.5f;

@@ -81,6 +81,13 @@ struct RasterGradients {
   std::vector<float> quats;           // [N, 4]
   std::vector<float> opacity_logits;  // [N]
   std::vector<float> colors;          // same shape as GaussianView::colors
+  // [N, F] ∂L/∂GaussianSet::features. The rasterizer leaves it alone (it never reads the
+  // features); the appearance model's backward fills it.
+  std::vector<float> features;
+  // [N, 3] ∂L/∂(the colour each Gaussian was blended with, RasterOutput::rgb), before the
+  // colour clamp's and rgb_scale's chain rule: what a caller that changed the colours between
+  // rasterize_project and rasterize_blend needs for its own backward pass.
+  std::vector<float> rgb;
   std::vector<float> means2d;         // [N, 2] ∂L/∂μ2d (summed over pixels)
   // Densification statistic (docs/METHOD.md §3): per Gaussian, the 2-norm of
   // (Σ_pixels |∂L/∂μ2d.x|, Σ_pixels |∂L/∂μ2d.y|) [loss units per px].
@@ -92,15 +99,29 @@ struct RasterGradients {
 
 // Renders `gaussians` seen from `camera`. Throws std::invalid_argument for bad input
 // (see GaussianView::validate, Camera::validate, active SH degree out of range).
+// rasterize_forward = rasterize_project, then rasterize_blend.
 void rasterize_forward(const GaussianView& gaussians, const Camera& camera,
                        const RasterSettings& settings, RasterOutput& out);
+
+// The forward pass in two stages, for a caller that changes the colours of the visible
+// Gaussians in between (the appearance model, docs/METHOD.md §10). rasterize_project fills
+// every per-Gaussian output (visible, means2d, conics, radii, depths, opacity, rgb = the colour
+// after SH and clamp); rasterize_blend bins the visible Gaussians and blends them with
+// out.rgb as it finds it. `camera` and `settings` must be the same for both.
+void rasterize_project(const GaussianView& gaussians, const Camera& camera,
+                       const RasterSettings& settings, RasterOutput& out);
+void rasterize_blend(const Camera& camera, const RasterSettings& settings, RasterOutput& out);
 
 // Gradients of a scalar loss L given ∂L/∂color [H,W,3], ∂L/∂alpha [H,W] and
 // ∂L/∂depth [H,W]; an empty span means zero. `forward` must be the result of
 // rasterize_forward with the same gaussians, camera and settings.
+// `rgb_scale` [N, 3] or empty (= 1): when the caller replaced out.rgb between the stages by a
+// colour c̃ whose derivative with respect to the SH colour c is diagonal, ∂c̃/∂c per Gaussian and
+// channel; the colour gradients are then ∂L/∂c = rgb_scale ⊙ ∂L/∂c̃. grads.rgb holds ∂L/∂c̃.
 void rasterize_backward(const GaussianView& gaussians, const Camera& camera,
                         const RasterSettings& settings, const RasterOutput& forward,
                         std::span<const float> dL_dcolor, std::span<const float> dL_dalpha,
-                        std::span<const float> dL_ddepth, RasterGradients& grads);
+                        std::span<const float> dL_ddepth, RasterGradients& grads,
+                        std::span<const float> rgb_scale = {});
 
 }  // namespace desplat

@@ -5,7 +5,9 @@
 // Every group is a row-aligned array of the Gaussian set (row i = Gaussian i, `width` floats
 // per row) with a gradient array of the same shape in RasterGradients. Static and distractor
 // buffers use the same groups; they differ only in colour layout (SH for static, RGB for
-// distractors) and in their learning rates (TrainConfig::lr, DistractorSettings::lr).
+// distractors), in whether they carry appearance features (static only, when the appearance
+// model is on; otherwise the group has zero width) and in their learning rates
+// (TrainConfig::lr, DistractorSettings::lr).
 #pragma once
 
 #include <array>
@@ -16,8 +18,8 @@
 
 namespace desplat {
 
-enum class ParamGroup { Means = 0, LogScales, Quats, OpacityLogits, Colors };
-inline constexpr int kParamGroups = 5;
+enum class ParamGroup { Means = 0, LogScales, Quats, OpacityLogits, Colors, Features };
+inline constexpr int kParamGroups = 6;
 
 // Learning rate per group (docs/METHOD.md §6); for Colors in SH mode the DC coefficient uses
 // `colors_dc` and the higher bands `colors_rest` (in RGB mode `colors_dc` applies to all three).
@@ -25,12 +27,17 @@ inline constexpr int kParamGroups = 5;
 struct LearningRates {
   float means = 1.6e-4f, log_scales = 5e-3f, quats = 1e-3f, opacity_logits = 5e-2f;
   float colors_dc = 2.5e-3f, colors_rest = 1.25e-4f;
+  float features = 5e-3f;  // the appearance model's per-Gaussian embeddings (the paper's appendix)
 };
+
+// ParamGroupInfo::width's two layouts that depend on the set.
+inline constexpr int kColorLayout = 0;     // GaussianView::color_floats_per_gaussian()
+inline constexpr int kFeatureLayout = -1;  // GaussianSet::feature_dim
 
 struct ParamGroupInfo {
   ParamGroup id;
   const char* name;                              // checkpoint arrays "<buffer>/<name>", messages
-  int width;                                     // floats per Gaussian; 0: the colour layout's
+  int width;                                     // floats per Gaussian, or kColorLayout / kFeatureLayout
   std::vector<float> GaussianSet::*values;       // [N, width]
   std::vector<float> RasterGradients::*grads;    // [N, width] ∂L/∂values
   float LearningRates::*rate;                    // Colors: the DC (or RGB) rate
@@ -43,14 +50,18 @@ inline constexpr std::array<ParamGroupInfo, kParamGroups> kParamGroupTable{{
     {ParamGroup::Quats, "quats", 4, &GaussianSet::quats, &RasterGradients::quats, &LearningRates::quats},
     {ParamGroup::OpacityLogits, "opacity_logits", 1, &GaussianSet::opacity_logits, &RasterGradients::opacity_logits,
      &LearningRates::opacity_logits},
-    {ParamGroup::Colors, "colors", 0, &GaussianSet::colors, &RasterGradients::colors, &LearningRates::colors_dc},
+    {ParamGroup::Colors, "colors", kColorLayout, &GaussianSet::colors, &RasterGradients::colors, &LearningRates::colors_dc},
+    {ParamGroup::Features, "features", kFeatureLayout, &GaussianSet::features, &RasterGradients::features,
+     &LearningRates::features},
 }};
 
 inline const ParamGroupInfo& param_group(ParamGroup g) { return kParamGroupTable[static_cast<size_t>(g)]; }
 
 // Floats per Gaussian of group `info` in a set with this colour layout.
 inline int group_width(const ParamGroupInfo& info, const GaussianSet& set) {
-  return info.width > 0 ? info.width : set.view().color_floats_per_gaussian();
+  if (info.width == kColorLayout) return set.view().color_floats_per_gaussian();
+  if (info.width == kFeatureLayout) return set.feature_dim;
+  return info.width;
 }
 
 }  // namespace desplat

@@ -36,6 +36,12 @@ struct AdamSettings {
   float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
 };
 
+// PyTorch's Adam on n contiguous values with one step size (= rate / bias correction 1) and
+// sqrt_bc2 = √(bias correction 2). Returns whether any value, first or second moment ended
+// non-finite. Every parameter set (Gaussians, the appearance model) updates through it.
+bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float step_size, float sqrt_bc2,
+               const AdamSettings& a);
+
 struct TrainableGaussians {
   GaussianSet params;
   std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "desplat/core/camera.hpp"
+#include "desplat/train/appearance.hpp"
 #include "desplat/raster/composite.hpp"
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
@@ -63,6 +64,7 @@ struct TrainConfig {
   DensifySettings densify;
   DistractorSettings distractors;
   TransientPointSettings transient_points;  // what initialization does with transient sparse points
+  AppearanceSettings appearance;            // per-image appearance of the static layer (off: plain colours)
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
   int random_init_points = 50000;  // used when the scene has no points
@@ -88,9 +90,10 @@ struct TrainConfig {
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
 // work of the view's distractor branch (its forward, backward, Adam and refinement);
 // `loss` includes the compositing and its gradient.
+// `appearance` is the appearance model's forward, backward and Adam (docs/METHOD.md §10).
 struct StepTimings {
-  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0;
-  double total() const { return forward + backward + loss + optimizer + distractor; }
+  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0, appearance = 0;
+  double total() const { return forward + backward + loss + optimizer + distractor + appearance; }
 };
 
 // The timing blocks of one step, in one place: each block's wall time goes to one field of
@@ -108,17 +111,36 @@ class StepProfiler {
 // One layer's share of a step (the static layer, or the view's distractor layer): its render,
 // the gradient of the loss with respect to that render, and the resulting parameter gradients.
 // Scratch reused every step; owned by the Trainer.
+// With an appearance model (the static layer, docs/METHOD.md §10) the colours change under
+// `embedding` between projection and blending, and backward also leaves the model's gradients
+// in appearance.d_mlp / d_embedding; appearance_seconds is the time that took (forward and
+// backward since the last render).
 struct LayerPass {
   RasterOutput forward;
   std::vector<float> d_color, d_alpha;  // [P·3], [P] ∂L/∂(premultiplied colour, alpha)
   RasterGradients grads;
+  AppearancePass appearance;
+  double appearance_seconds = 0;
 
-  void render(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs) {
-    rasterize_forward(g.params.view(), camera, rs, forward);
+  void render(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs,
+              const AppearanceModel* model = nullptr, std::span<const float> embedding = {}) {
+    appearance_seconds = 0;
+    if (!model) return rasterize_forward(g.params.view(), camera, rs, forward);
+    rasterize_project(g.params.view(), camera, rs, forward);
+    const Stopwatch watch;
+    appearance.forward(*model, embedding, g.params, forward, rs.num_threads);
+    appearance_seconds += watch.seconds();
+    rasterize_blend(camera, rs, forward);
   }
   Layer layer() const { return {forward.color, forward.alpha}; }
-  void backward(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs) {
-    rasterize_backward(g.params.view(), camera, rs, forward, d_color, d_alpha, {}, grads);
+  void backward(const TrainableGaussians& g, const Camera& camera, const RasterSettings& rs,
+                const AppearanceModel* model = nullptr, std::span<const float> embedding = {}) {
+    rasterize_backward(g.params.view(), camera, rs, forward, d_color, d_alpha, {}, grads,
+                       model ? std::span<const float>(appearance.rgb_scale) : std::span<const float>());
+    if (!model) return;
+    const Stopwatch watch;
+    appearance.backward(*model, embedding, g.params, grads, rs.num_threads);
+    appearance_seconds += watch.seconds();
   }
 };
 
@@ -146,9 +168,18 @@ struct StepStats {
   size_t static_visible = 0;
 };
 
+// How a test view was scored.
+enum class EvalProtocol {
+  full_image,          // the render (plain colours) against the whole photo
+  appearance_halves,   // Photo Tourism: the view's embedding fitted on the left half, scored on the right
+};
+const char* to_string(EvalProtocol p);
+
 struct ViewMetrics {
   std::string name;
   double psnr = 0, ssim = 0;
+  EvalProtocol protocol = EvalProtocol::full_image;
+  std::vector<float> embedding;  // appearance_halves: the fitted embedding (renders the view in its look)
 };
 
 class Trainer {
@@ -169,14 +200,26 @@ class Trainer {
   std::mt19937_64& rng() { return rng_; }
   const std::mt19937_64& rng() const { return rng_; }
 
-  // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped).
-  FloatImage render(const Camera& camera, const std::array<float, 3>& background) const;
+  // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped); with an
+  // `embedding` (appearance models only, [image_dim]) under that appearance, else in the plain
+  // colours.
+  FloatImage render(const Camera& camera, const std::array<float, 3>& background,
+                    std::span<const float> embedding = {}) const;
   // Every layer of training view `train_view` at its full training resolution.
   ViewLayers render_layers(size_t train_view, const std::array<float, 3>& background) const;
   // What every render at this step uses: the configured threads and the active SH degree.
   RasterSettings raster_settings() const;
-  // PSNR/SSIM of every view's render over the evaluation background.
+  // PSNR/SSIM of every view's render over the evaluation background: the whole image for a
+  // model without appearance; with appearance the Photo Tourism protocol (fit_embedding on the
+  // left half, score the right half).
   std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
+  // Test-time appearance: an embedding for `view` fitted by settings.test_steps Adam steps at
+  // settings.test_lr on the pixels where `fit` is 1 ([H·W], the view's own mask applies too),
+  // starting from the mean of the training embeddings; everything else frozen.
+  std::vector<float> fit_embedding(const TrainView& view, std::span<const float> fit) const;
+  // Appearance model (appearance.hpp); empty (no views) when config.appearance is off.
+  const AppearanceModel& appearance() const { return appearance_; }
+  AppearanceModel& mutable_appearance() { return appearance_; }
 
   // Where non-finite values are reported (once per incident); default: stderr.
   std::function<void(const std::string&)> warn;
@@ -202,6 +245,8 @@ class Trainer {
   TrainConfig config_;
   TrainableGaussians gaussians_;
   std::vector<TrainableGaussians> distractors_;
+  AppearanceModel appearance_;
+  std::vector<float> d_embeddings_;  // [views, image_dim] scratch: the step view's row is nonzero
   std::mt19937_64 rng_;
   int64_t step_ = 0;
   // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).

@@ -15,6 +15,10 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& ckpt);
 GaussianSet gaussians_from_checkpoint(const Checkpoint& ckpt);
 // The training views that own distractor buffers, in buffer order (empty: static-only model).
 std::vector<std::string> distractor_views_in_checkpoint(const Checkpoint& ckpt);
+// The training views of the appearance model's embeddings, in order (empty: no appearance).
+std::vector<std::string> appearance_views_in_checkpoint(const Checkpoint& ckpt);
+// The appearance model (throws CheckpointError for a model trained without one).
+AppearanceModel appearance_from_checkpoint(const Checkpoint& ckpt);
 // The distractors of buffer `index` (an index into distractor_views_in_checkpoint).
 GaussianSet distractors_from_checkpoint(const Checkpoint& ckpt, size_t index);
 
