@@ -39,9 +39,10 @@ int main(int argc, char** argv) {
   app.add_flag("--static-only", o.static_only,
                "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
   app.add_option("--effects", o.effects,
-                 "what to model beyond the static scene: none, or a comma-separated list of distractors "
-                 "(per-view distractor Gaussians, the default) and appearance (per-image exposure and colour, "
-                 "scored by the Photo Tourism protocol)");
+                 "what to model beyond the static scene: auto (the default: distractors, and appearance when the "
+                 "SfM tracks show the photos' exposure or colour balance differ), none, or a comma-separated "
+                 "list of distractors (per-view distractor Gaussians) and appearance (per-image exposure and "
+                 "colour; test views are then scored by the Photo Tourism protocol)");
   app.add_option("--distractors-per-view", o.distractors_per_view,
                  "exactly N initial distractor Gaussians per training view (default: 1000 per 504x378 "
                  "pixels, the paper's density, scaled with the training image size)")

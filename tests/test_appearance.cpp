@@ -9,6 +9,9 @@
 #include <filesystem>
 #include <random>
 
+#include "desplat/io/scene.hpp"
+#include "desplat/jobs/training_run.hpp"
+#include "desplat/synth/synth.hpp"
 #include "desplat/train/appearance.hpp"
 #include "desplat/train/effects.hpp"
 #include "desplat/train/training_checkpoint.hpp"
@@ -367,6 +370,59 @@ TEST(Appearance, TrainingIsBitIdenticalAcrossThreadCounts) {
   EXPECT_EQ(a.appearance().mlp, b.appearance().mlp);
 }
 
+// A desplat_synth capture (bench.json at 160×120, 24 views, no distractors), loaded as training
+// runs load it: real tracks (points with the views that see them).
+TrainingData synth_capture(const std::string& name, const std::string& extra) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("desplat_effects_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  testing::spit(dir / "scene.json", R"({"base": ")" + (std::filesystem::path(DESPLAT_SOURCE_DIR) /
+                                                        "data/synthetic/bench.json").string() +
+                                        R"(", "camera.width": 160, "camera.height": 120, "views.count": 24,
+                                            "distractors.clutter_ratio": 0)" + extra + "}");
+  synth::GenerateOptions g;
+  g.out = dir / "capture";
+  synth::generate_scene(synth::load_description(dir / "scene.json"), g);
+  TrainingData data = load_training_data(load_colmap_scene(g.out, SceneOptions{}));
+  std::filesystem::remove_all(dir);
+  return data;
+}
+
+// Known answer: each view's photo scaled by a known gain; --effects auto's estimate (the median
+// ratio over the view's track samples) recovers it, and the spread decides. The synthetic
+// capture with its own exposure changes (±1 stop, ±10 % white balance) turns appearance on;
+// the same capture without them does not.
+TEST(Effects, AutoReadsEachViewsGainFromTheTracksAndTurnsAppearanceOnlyOnWhenTheySpread) {
+  const TrainingData clean = synth_capture("clean", "");
+  const EffectsEvidence none = choose_effects(clean);
+  ASSERT_EQ(none.judged_views, int(clean.train.size()));
+  EXPECT_FALSE(none.chosen.appearance) << none.reasons[1];
+  EXPECT_TRUE(none.chosen.distractors);
+
+  TrainingData scaled = clean;
+  const float stops[6] = {-0.6f, -0.3f, 0.0f, 0.2f, 0.4f, 0.7f};
+  for (size_t v = 0; v < scaled.train.size(); ++v)
+    for (float& p : scaled.train[v].image.pixels) p = std::min(1.0f, p * std::exp2(stops[v % 6]));
+  const EffectsEvidence ev = choose_effects(scaled);
+  EXPECT_TRUE(ev.chosen.appearance) << ev.reasons[1];
+  for (size_t v = 0; v < scaled.train.size(); ++v)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(ev.views[v].log2_gain[c] - none.views[v].log2_gain[c], stops[v % 6], 0.05)
+          << "view " << v << " channel " << c;
+
+  const TrainingData exposed = synth_capture("exposed", R"(, "exposure": {"stops": 1, "white_balance": 0.1})");
+  const EffectsEvidence real = choose_effects(exposed);
+  EXPECT_TRUE(real.chosen.appearance) << real.reasons[1];
+
+  // Without tracks there is no evidence: the defaults, said so.
+  TrainingData no_tracks = clean;
+  for (auto& views : no_tracks.point_train_views) views.clear();
+  const EffectsEvidence blind = choose_effects(no_tracks);
+  EXPECT_TRUE(blind.chosen.distractors);
+  EXPECT_FALSE(blind.chosen.appearance);
+  EXPECT_CONTAINS(blind.reasons[1], "too few to judge");
+}
+
 TEST(Effects, NamesMapToSwitchesAndUnknownOnesAreRefused) {
   TrainConfig c;
   Effects::parse("appearance,distractors").apply(c);
@@ -380,6 +436,8 @@ TEST(Effects, NamesMapToSwitchesAndUnknownOnesAreRefused) {
                   "unknown effect 'sky'");
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { Effects::parse("background"); }),
                   "'background' is not available yet");
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { Effects::parse("auto,appearance"); }),
+                  "'auto' stands alone");
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { Effects::parse(""); }), "--effects is empty");
 }
 

@@ -464,6 +464,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
+  EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
   // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
   const TrainConfig def = preset_config("default");
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
@@ -477,6 +478,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);
   EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
+  EXPECT_EQ(def.appearance.hidden_width, 32);  // docs/bench/issue15_effects.md
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
                   "unknown preset 'fastest' (known: default, paper)");
 }

@@ -314,8 +314,20 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   const Outcome test_view = run(render + " --out " + (root_ / "look2").string() + " --appearance view_0.png");
   EXPECT_EQ(test_view.exit_code, 1);
   EXPECT_NE(test_view.output.find("'view_0.png' is not a training view"), std::string::npos) << test_view.output;
+  // The default is --effects auto: on this capture (one exposure) distractors only, with the
+  // evidence in the log and config.json.
   const Outcome plain = run(train() + " --out " + (root_ / "no_look").string() + " --iterations 5 --threads 2");
   ASSERT_EQ(plain.exit_code, 0) << plain.output;
+  EXPECT_NE(plain.output.find("--effects auto: distractors\n"), std::string::npos) << plain.output;
+  nlohmann::json auto_config;
+  std::ifstream(root_ / "no_look" / "config.json") >> auto_config;
+  EXPECT_EQ(auto_config["run"]["effects"], "distractors");
+  EXPECT_EQ(auto_config["run"]["effects_chosen_by"], "auto");
+  EXPECT_EQ(auto_config["run"]["effects_evidence"]["reasons"].size(), 2u);
+  // … and trains exactly the model that names that set.
+  const Outcome named = run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects distractors");
+  ASSERT_EQ(named.exit_code, 0) << named.output;
+  EXPECT_EQ(testing::slurp(root_ / "named" / "point_cloud.ply"), testing::slurp(root_ / "no_look" / "point_cloud.ply"));
   const Outcome none = run(std::string(DESPLAT_RENDER_BIN) + " --model " + (root_ / "no_look").string() + " --out " +
                            (root_ / "look3").string() + " --appearance view_1.png");
   EXPECT_EQ(none.exit_code, 1);

@@ -102,6 +102,18 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
           {"protocol", to_string(m.front().protocol)}};
 }
 
+// --effects auto's evidence, for config.json and metrics.json.
+json effects_evidence_json(const EffectsEvidence& ev) {
+  json views = json::array();
+  for (const ViewEvidence& v : ev.views)
+    views.push_back({{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain}});
+  return {{"reasons", ev.reasons},
+          {"judged_views", ev.judged_views},
+          {"exposure_spread_stops", ev.exposure_spread_stops},
+          {"white_balance_spread", ev.white_balance_spread},
+          {"views", views}};
+}
+
 // Distractor-mask quality against the scene's ground truth; null without masks.
 json mask_json(const MaskMetrics& m) {
   if (m.views.empty()) return nullptr;
@@ -289,7 +301,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.static_only && opt.effects && *opt.effects != "none")
     throw std::invalid_argument("--static-only and --effects " + *opt.effects + " contradict each other");
   if (opt.static_only) config.distractors.enabled = false;
-  if (opt.effects) Effects::parse(*opt.effects).apply(config);
+  // --effects defaults to auto; --static-only means none, and --preset paper keeps the
+  // authors' set (distractors only) unless --effects says otherwise.
+  const std::string effects = opt.effects.value_or(opt.static_only ? "none" : opt.preset == "paper" ? "" : "auto");
+  const bool auto_effects = effects == "auto";
+  if (!effects.empty() && !auto_effects) Effects::parse(effects).apply(config);
   if (opt.distractors_per_view) {
     config.distractors.initial_count = *opt.distractors_per_view;
     config.distractors.reference_pixels = 0;  // exactly that many, whatever the image size
@@ -314,6 +330,14 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                   " was trained on: " + changed);
   }
   const TrainingData data = load_training_data(scene);
+  json effects_evidence = nullptr;
+  if (auto_effects) {
+    const EffectsEvidence ev = choose_effects(data);
+    ev.chosen.apply(config);
+    std::printf("--effects auto: %s\n", ev.chosen.to_string().c_str());
+    for (const std::string& why : ev.reasons) std::printf("  %s\n", why.c_str());
+    effects_evidence = effects_evidence_json(ev);
+  }
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
@@ -343,8 +367,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps; scored on the right)\n",
                 config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
                 config.appearance.hidden_width, config.appearance.test_steps);
-  const json run_json = {
-      {"static_only", opt.static_only}, {"preset", opt.preset}, {"effects", Effects::of(config).to_string()}};
+  const json run_json = {{"static_only", opt.static_only},
+                         {"preset", opt.preset},
+                         {"effects", Effects::of(config).to_string()},
+                         {"effects_chosen_by", auto_effects ? "auto" : "the command line and preset"},
+                         {"effects_evidence", effects_evidence}};
   Trainer trainer(data, config);
   // The trainer's configuration is the effective one (e.g. a static-only model keeps every
   // sparse point): that is what config.json records.
@@ -449,6 +476,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   metrics["step"] = trainer.current_step();
   metrics["gaussians"] = trainer.gaussians().size();
   metrics["mode"] = config.distractors.enabled ? "desplat" : "static-only";
+  metrics["effects"] = {{"chosen", Effects::of(config).to_string()},
+                        {"by", auto_effects ? "auto" : "the command line and preset"},
+                        {"evidence", effects_evidence}};
   metrics["cost"] = model_cost(trainer);
   metrics["transient_points"] = {{"action", to_string(config.transient_points.action)},
                                  {"points", trainer.transient_point_count},

@@ -214,7 +214,6 @@ void AppearancePass::forward(const AppearanceModel& model, std::span<const float
   for (size_t i = 0; i < n; ++i)
     if (fw.visible[i]) rows.push_back(int32_t(i));
   const int64_t count = int64_t(rows.size());
-  outputs.assign(size_t(count) * 6, 0.0f);
   sh_rgb.assign(size_t(count) * 3, 0.0f);
   active.assign(size_t(count) * 3, 0);
   rgb_scale.assign(3 * n, 0.0f);
@@ -232,8 +231,6 @@ void AppearancePass::forward(const AppearanceModel& model, std::span<const float
         const size_t i = size_t(rows[r]);
         for (int c = 0; c < 3; ++c) {
           const float beta = out(r - r0, c), gamma = 1.0f + out(r - r0, 3 + c);
-          outputs[6 * r + c] = out(r - r0, c);
-          outputs[6 * r + 3 + c] = out(r - r0, 3 + c);
           const float sh = fw.rgb[3 * i + c];
           sh_rgb[3 * r + c] = sh;
           const float toned = gamma * sh + beta;

@@ -23,6 +23,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.seed_uncovered = false;
     c.distractors.grow_after = 0;
     c.transient_points.action = TransientPointAction::keep;
+    c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
     return c;
   }
   std::string known;

@@ -35,7 +35,9 @@ struct TrainingRunOptions {
   std::optional<uint64_t> seed;
   std::optional<int> threads;
   bool static_only = false;  // the Splatfacto baseline: no distractors (= effects "none")
-  std::optional<std::string> effects;  // train/effects.hpp; unset: the preset's (distractors)
+  // train/effects.hpp: auto, none or a list; unset: auto (none with static_only, the preset's
+  // own set with --preset paper).
+  std::optional<std::string> effects;
   // Ablation switches (override the config file): distractors.initial_count with
   // reference_pixels = 0 (exactly that many per view), distractors.density_control = false,
   // distractors.regularize = false.

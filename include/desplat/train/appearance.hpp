@@ -27,7 +27,9 @@ struct AppearanceSettings {
   bool enabled = false;
   int image_dim = 32;           // e_j
   int fourier_frequencies = 4;  // z_i has 6 per frequency: sin and cos of each axis
-  int hidden_width = 128;
+  // 32 measured as good as the paper's 128 on per-image exposure and white balance at a third
+  // to a quarter of the cost (docs/bench/issue15_effects.md); --preset paper sets 128.
+  int hidden_width = 32;
   int hidden_layers = 2;
   float lr_mlp = 5e-4f, lr_image = 1e-3f;  // z_i's rate is LearningRates::features
   // Test-time appearance (the Photo Tourism protocol): a held-out view's embedding is fitted
@@ -77,7 +79,6 @@ struct AppearanceModel {
 // Scratch reused between steps; owned by the caller.
 struct AppearancePass {
   std::vector<int32_t> rows;        // the visible Gaussians, in index order
-  std::vector<float> outputs;       // [rows, 6] o = (o_β, o_γ)
   std::vector<float> sh_rgb;        // [rows, 3] c before the change
   std::vector<uint8_t> active;      // [rows, 3] 1 where γ ⊙ c + β > 0 (the clamp passed it)
   std::vector<float> rgb_scale;     // [N, 3] ∂c̃/∂c: γ, or 0 where the clamp at 0 was active

@@ -3,7 +3,9 @@
 // this is the one place that maps names to switches.
 #pragma once
 
+#include <array>
 #include <string>
+#include <vector>
 
 #include "desplat/train/trainer.hpp"
 
@@ -14,12 +16,51 @@ struct Effects {
   bool appearance = false;   // per-image appearance embeddings and MLP (static colours)
 
   // "none" or a comma-separated list of "distractors" and "appearance", in any order. Throws
-  // std::invalid_argument naming the unknown or unavailable entry ("auto" and "background"
-  // are not available yet and say so).
+  // std::invalid_argument naming the unknown or unavailable entry ("background" is not
+  // available yet; "auto" is the caller's: choose_effects below).
   static Effects parse(const std::string& text);
   static Effects of(const TrainConfig& config);
   void apply(TrainConfig& config) const;
   std::string to_string() const;  // "none" or the list, in the order above
 };
+
+}  // namespace desplat
+
+namespace desplat {
+
+struct TrainingData;
+
+// --effects auto (docs/METHOD.md §10, choosing the effects): evidence gathered before training
+// from the SfM tracks. Every track element of a training view is a sample: the photo's colour
+// at the point's projection against the point's own colour (COLMAP's mean over its track).
+// Only the appearance model is decided from evidence; distractors stay on (no test for
+// transients before training has measured reliable yet: docs/bench/issue15_effects.md).
+struct EffectsRules {
+  // Appearance when the views' brightness gains (the median log₂ ratio of their samples, mean
+  // over RGB) spread by more than this many stops (robust standard deviation over views), or
+  // their colour balance (each channel's gain minus the view's mean gain) by more than
+  // white_balance_spread (log₂ units, robust standard deviation over views, the largest of
+  // the three channels).
+  float exposure_spread_stops = 0.2f;
+  float white_balance_spread = 0.05f;
+  int min_samples_per_view = 30;  // fewer: the view gives no evidence
+};
+
+struct ViewEvidence {
+  std::string name;
+  int samples = 0;
+  std::array<float, 3> log2_gain{0, 0, 0};  // per channel, the median log₂(photo / point colour)
+};
+
+struct EffectsEvidence {
+  std::vector<ViewEvidence> views;  // data.train order
+  int judged_views = 0;             // views with at least min_samples_per_view samples
+  double exposure_spread_stops = 0, white_balance_spread = 0;
+  Effects chosen;
+  std::vector<std::string> reasons;  // one sentence per effect, saying why it is on or off
+};
+
+// Throws std::invalid_argument when the track information does not match the points.
+EffectsEvidence choose_effects(const TrainingData& data, const EffectsRules& rules = {});
 
 }  // namespace desplat
