@@ -394,33 +394,49 @@ TrainingData synth_capture(const std::string& name, const std::string& extra) {
 // the same capture without them does not.
 TEST(Effects, AutoReadsEachViewsGainFromTheTracksAndTurnsAppearanceOnlyOnWhenTheySpread) {
   const TrainingData clean = synth_capture("clean", "");
-  const EffectsEvidence none = choose_effects(clean);
+  const EffectsEvidence none = examine_effects(clean);
   ASSERT_EQ(none.judged_views, int(clean.train.size()));
-  EXPECT_FALSE(none.chosen.appearance) << none.reasons[1];
-  EXPECT_TRUE(none.chosen.distractors);
+  EXPECT_FALSE(none.appearance) << none.reason;
 
   TrainingData scaled = clean;
   const float stops[6] = {-0.6f, -0.3f, 0.0f, 0.2f, 0.4f, 0.7f};
   for (size_t v = 0; v < scaled.train.size(); ++v)
     for (float& p : scaled.train[v].image.pixels) p = std::min(1.0f, p * std::exp2(stops[v % 6]));
-  const EffectsEvidence ev = choose_effects(scaled);
-  EXPECT_TRUE(ev.chosen.appearance) << ev.reasons[1];
+  const EffectsEvidence ev = examine_effects(scaled);
+  EXPECT_TRUE(ev.appearance) << ev.reason;
   for (size_t v = 0; v < scaled.train.size(); ++v)
     for (int c = 0; c < 3; ++c)
       EXPECT_NEAR(ev.views[v].log2_gain[c] - none.views[v].log2_gain[c], stops[v % 6], 0.05)
           << "view " << v << " channel " << c;
 
   const TrainingData exposed = synth_capture("exposed", R"(, "exposure": {"stops": 1, "white_balance": 0.1})");
-  const EffectsEvidence real = choose_effects(exposed);
-  EXPECT_TRUE(real.chosen.appearance) << real.reasons[1];
+  const EffectsEvidence real = examine_effects(exposed);
+  EXPECT_TRUE(real.appearance) << real.reason;
 
-  // Without tracks there is no evidence: the defaults, said so.
+  // Without tracks there is no evidence: nothing is turned on, and the reason says so.
   TrainingData no_tracks = clean;
   for (auto& views : no_tracks.point_train_views) views.clear();
-  const EffectsEvidence blind = choose_effects(no_tracks);
-  EXPECT_TRUE(blind.chosen.distractors);
-  EXPECT_FALSE(blind.chosen.appearance);
-  EXPECT_CONTAINS(blind.reasons[1], "too few to judge");
+  const EffectsEvidence blind = examine_effects(no_tracks);
+  EXPECT_FALSE(blind.appearance);
+  EXPECT_CONTAINS(blind.reason, "too few to judge");
+}
+
+// Auto adds appearance to the configured set when the evidence calls for it and never turns
+// off what the preset or --config turned on.
+TEST(Effects, AutoOnlyAddsAppearanceToTheConfiguredSet) {
+  EffectsEvidence calls, quiet;
+  calls.appearance = true, calls.reason = "spread";
+  quiet.reason = "flat";
+  std::vector<std::string> why;
+  EXPECT_EQ(choose_effects({true, false}, calls, why).to_string(), "distractors,appearance");
+  EXPECT_EQ(why.size(), 2u);
+  EXPECT_CONTAINS(why[1], "appearance on: spread");
+  why.clear();
+  EXPECT_EQ(choose_effects({false, false}, quiet, why).to_string(), "none");
+  EXPECT_CONTAINS(why[0], "distractors off: as the preset and --config set them");
+  why.clear();
+  EXPECT_EQ(choose_effects({true, true}, quiet, why).to_string(), "distractors,appearance");
+  EXPECT_CONTAINS(why[1], "on because --config turns it on");
 }
 
 TEST(Effects, NamesMapToSwitchesAndUnknownOnesAreRefused) {

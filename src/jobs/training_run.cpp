@@ -103,11 +103,11 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
 }
 
 // --effects auto's evidence, for config.json and metrics.json.
-json effects_evidence_json(const EffectsEvidence& ev) {
+json effects_evidence_json(const EffectsEvidence& ev, const std::vector<std::string>& reasons) {
   json views = json::array();
   for (const ViewEvidence& v : ev.views)
     views.push_back({{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain}});
-  return {{"reasons", ev.reasons},
+  return {{"reasons", reasons},
           {"judged_views", ev.judged_views},
           {"exposure_spread_stops", ev.exposure_spread_stops},
           {"white_balance_spread", ev.white_balance_spread},
@@ -332,11 +332,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const TrainingData data = load_training_data(scene);
   json effects_evidence = nullptr;
   if (auto_effects) {
-    const EffectsEvidence ev = choose_effects(data);
-    ev.chosen.apply(config);
-    std::printf("--effects auto: %s\n", ev.chosen.to_string().c_str());
-    for (const std::string& why : ev.reasons) std::printf("  %s\n", why.c_str());
-    effects_evidence = effects_evidence_json(ev);
+    const EffectsEvidence ev = examine_effects(data);
+    std::vector<std::string> why;
+    const Effects chosen = choose_effects(Effects::of(config), ev, why);
+    chosen.apply(config);
+    std::printf("--effects auto: %s\n", chosen.to_string().c_str());
+    for (const std::string& line : why) std::printf("  %s\n", line.c_str());
+    effects_evidence = effects_evidence_json(ev, why);
   }
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,

@@ -83,11 +83,11 @@ std::string fixed2(double x) {
 // a neighbour, JPEG noise are large relative to the value): they are left out.
 constexpr float kDarkest = 0.15f;
 
-EffectsEvidence choose_effects(const TrainingData& data, const EffectsRules& r) {
+EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r) {
   EffectsEvidence ev;
   const size_t n = data.points.size();
   if (data.point_train_views.size() != n || data.colors.size() != n)
-    throw std::invalid_argument("choose_effects: track information does not match the points");
+    throw std::invalid_argument("examine_effects: track information does not match the points");
   // Per view and channel, log₂(photo / point colour) of every sample whose colours are neither
   // near black nor near saturation (where a ratio says nothing about exposure).
   std::vector<std::array<std::vector<double>, 3>> ratios(data.train.size());
@@ -95,7 +95,7 @@ EffectsEvidence choose_effects(const TrainingData& data, const EffectsRules& r) 
   for (size_t i = 0; i < n; ++i)
     for (const int32_t v : data.point_train_views[i]) {
       if (v < 0 || size_t(v) >= data.train.size())
-        throw std::invalid_argument("choose_effects: a track names a training view that does not exist");
+        throw std::invalid_argument("examine_effects: a track names a training view that does not exist");
       const TrainView& view = data.train[size_t(v)];
       const long long pixel = view.camera.pixel_of(data.points[i]);
       if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;
@@ -123,25 +123,32 @@ EffectsEvidence choose_effects(const TrainingData& data, const EffectsRules& r) 
     }
     ev.views.push_back(e);
   }
-  ev.chosen.distractors = true;
-  ev.reasons.push_back("distractors on: DeSplat's default (no test for transients before training is reliable yet)");
   if (ev.judged_views < 3) {
-    ev.reasons.push_back("appearance off: only " + std::to_string(ev.judged_views) + " training views have " +
-                         std::to_string(r.min_samples_per_view) + " or more usable SfM track samples, too few to judge");
+    ev.reason = "only " + std::to_string(ev.judged_views) + " training views have " +
+                std::to_string(r.min_samples_per_view) + " or more usable SfM track samples, too few to judge";
     return ev;
   }
   ev.exposure_spread_stops = robust_spread(brightness);
   // Per channel across views: a cast every photo shares (or a bias of the point colours) is
   // not a difference between the photos.
   for (int c = 0; c < 3; ++c) ev.white_balance_spread = std::max(ev.white_balance_spread, robust_spread(balance[c]));
-  ev.chosen.appearance =
+  ev.appearance =
       ev.exposure_spread_stops > r.exposure_spread_stops || ev.white_balance_spread > r.white_balance_spread;
-  ev.reasons.push_back(std::string("appearance ") + (ev.chosen.appearance ? "on" : "off") + ": over " +
-                       std::to_string(ev.judged_views) + " training views the brightness spreads by " +
-                       fixed2(ev.exposure_spread_stops) + " stops (threshold " + fixed2(r.exposure_spread_stops) +
-                       ") and the colour balance by " + fixed2(ev.white_balance_spread) + " (threshold " +
-                       fixed2(r.white_balance_spread) + ")");
+  ev.reason = "over " + std::to_string(ev.judged_views) + " training views the brightness spreads by " +
+              fixed2(ev.exposure_spread_stops) + " stops (threshold " + fixed2(r.exposure_spread_stops) +
+              ") and the colour balance by " + fixed2(ev.white_balance_spread) + " (threshold " +
+              fixed2(r.white_balance_spread) + ")";
   return ev;
+}
+
+Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why) {
+  Effects chosen = configured;
+  chosen.appearance = configured.appearance || evidence.appearance;
+  why.push_back(std::string("distractors ") + (chosen.distractors ? "on" : "off") +
+                ": as the preset and --config set them (no test for transients before training is reliable yet)");
+  why.push_back(std::string("appearance ") + (chosen.appearance ? "on" : "off") + ": " + evidence.reason +
+                (configured.appearance && !evidence.appearance ? "; on because --config turns it on" : ""));
+  return chosen;
 }
 
 }  // namespace desplat

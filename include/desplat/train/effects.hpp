@@ -33,8 +33,9 @@ struct TrainingData;
 // --effects auto (docs/METHOD.md §10, choosing the effects): evidence gathered before training
 // from the SfM tracks. Every track element of a training view is a sample: the photo's colour
 // at the point's projection against the point's own colour (COLMAP's mean over its track).
-// Only the appearance model is decided from evidence; distractors stay on (no test for
-// transients before training has measured reliable yet: docs/bench/issue15_effects.md).
+// Only the appearance model is decided from evidence, and only ever turned on: distractors
+// stay as the preset and --config set them (no test for transients before training has
+// measured reliable yet: docs/bench/issue15_effects.md).
 struct EffectsRules {
   // Appearance when the views' brightness gains (the median log₂ ratio of their samples, mean
   // over RGB) spread by more than this many stops (robust standard deviation over views), or
@@ -56,11 +57,15 @@ struct EffectsEvidence {
   std::vector<ViewEvidence> views;  // data.train order
   int judged_views = 0;             // views with at least min_samples_per_view samples
   double exposure_spread_stops = 0, white_balance_spread = 0;
-  Effects chosen;
-  std::vector<std::string> reasons;  // one sentence per effect, saying why it is on or off
+  bool appearance = false;          // the evidence calls for the appearance model
+  std::string reason;               // one sentence: why appearance is called for or not
 };
 
 // Throws std::invalid_argument when the track information does not match the points.
-EffectsEvidence choose_effects(const TrainingData& data, const EffectsRules& rules = {});
+EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& rules = {});
+
+// --effects auto: `configured` (the preset's and --config's set) plus appearance when
+// `evidence` calls for it; every line of `why` says why an effect is on or off.
+Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why);
 
 }  // namespace desplat
