@@ -1,5 +1,7 @@
 #include "desplat/train/effects.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 #include <stdexcept>
@@ -42,17 +44,14 @@ void Effects::apply(TrainConfig& config) const {
 std::string Effects::to_string() const {
   std::string out;
   for (auto [on, name] : {std::pair{distractors, "distractors"}, std::pair{appearance, "appearance"}})
-    if (on) out += (out.empty() ? "" : ",") + std::string(name);
+    if (on) {
+      if (!out.empty()) out += ',';
+      out += name;
+    }
   return out.empty() ? "none" : out;
 }
 
-}  // namespace desplat
-
 // --effects auto: the evidence (docs/METHOD.md §10, choosing the effects).
-#include <algorithm>
-#include <cmath>
-
-namespace desplat {
 namespace {
 
 double median(std::vector<double> v) {

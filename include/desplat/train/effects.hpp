@@ -24,12 +24,6 @@ struct Effects {
   std::string to_string() const;  // "none" or the list, in the order above
 };
 
-}  // namespace desplat
-
-namespace desplat {
-
-struct TrainingData;
-
 // --effects auto (docs/METHOD.md §10, choosing the effects): evidence gathered before training
 // from the SfM tracks. Every track element of a training view is a sample: the photo's colour
 // at the point's projection against the point's own colour (COLMAP's mean over its track).
