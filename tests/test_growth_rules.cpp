@@ -460,6 +460,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.initial_count, 1000);
   EXPECT_EQ(paper.distractors.pixels_per_distractor, 0);
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
+  EXPECT_EQ(paper.distractors.lambda_mask_tv, 0.0f);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
@@ -472,6 +473,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
   EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
+  EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);
   EXPECT_TRUE(def.distractors.reseed_starved_views);
   EXPECT_TRUE(def.distractors.seed_uncovered);
   EXPECT_EQ(def.distractors.grow_after, 0);

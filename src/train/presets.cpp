@@ -18,6 +18,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.inherit_moments = false;
     c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view
     c.distractors.lambda_explained = 0.0f;
+    c.distractors.lambda_mask_tv = 0.0f;
     c.distractors.pixels_per_distractor = 0;
     c.distractors.reseed_starved_views = false;
     c.distractors.seed_uncovered = false;

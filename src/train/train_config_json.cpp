@@ -76,6 +76,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.regularize", &c.distractors.regularize},
       {"distractors.lambda_static", &c.distractors.lambda_static},
       {"distractors.lambda_distractor", &c.distractors.lambda_distractor},
+      {"distractors.lambda_mask_tv", &c.distractors.lambda_mask_tv},
       {"distractors.explained_tolerance", &c.distractors.explained_tolerance},
       {"distractors.lambda_explained", &c.distractors.lambda_explained},
       {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
@@ -191,6 +192,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.init_opacity", c.distractors.init_opacity, 0, 0.999, true, "in (0, 0.999]");
   require("distractors.lambda_static", c.distractors.lambda_static, 0, kBig, false, "≥ 0");
   require("distractors.lambda_distractor", c.distractors.lambda_distractor, 0, kBig, false, "≥ 0");
+  require("distractors.lambda_mask_tv", c.distractors.lambda_mask_tv, 0, kBig, false, "≥ 0");
   require("distractors.explained_tolerance", c.distractors.explained_tolerance, 0, kBig, true, "> 0");
   require("distractors.lambda_explained", c.distractors.lambda_explained, 0, kBig, false, "≥ 0");
   require("init.transient_color_tolerance", c.transient_points.color_tolerance, 0, kBig, false, "≥ 0");

@@ -13,6 +13,7 @@
 
 #include "desplat/train/init.hpp"
 #include "desplat/train/loss.hpp"
+#include "desplat/train/mask_coherence.hpp"
 #include "desplat/train/view_residual.hpp"
 
 namespace desplat {
@@ -260,6 +261,9 @@ StepStats Trainer::step() {
       stats.loss += alpha_regularizers(statics, distractor, config_.distractors.lambda_static,
                                        config_.distractors.lambda_distractor, static_pass_.d_alpha,
                                        distractor_pass_.d_alpha, keep);
+    if (distractors && config_.distractors.regularize && config_.distractors.lambda_mask_tv > 0)
+      stats.loss += mask_total_variation(distractor.alpha, cam.width, cam.height,
+                                         config_.distractors.lambda_mask_tv, distractor_pass_.d_alpha, keep);
     if (config_.distractors.enabled) {
       const DistractorSettings& ds = config_.distractors;
       const ViewResidual residual = measure_view_residual(
