@@ -2,9 +2,11 @@
 // validation, and a tiny end-to-end grid on a generated scene with masks (resume included).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "desplat/jobs/bench_run.hpp"
+#include "desplat/jobs/clutter_summary.hpp"
 #include "desplat/jobs/report.hpp"
 #include "support/expect.hpp"
 #include "desplat/eval/plot.hpp"
@@ -116,9 +118,60 @@ TEST(BenchPlots, ClutterPlotWhenScenesCarryRatios) {
     }
   const std::vector<fs::path> plots = write_bench_plots(dir, points);
   EXPECT_NE(std::find(plots.begin(), plots.end(), dir / "psnr_vs_clutter.png"), plots.end());
+  // A static-only run on the clean scene: the summary and its recovered-fraction plot.
+  EXPECT_NE(std::find(plots.begin(), plots.end(), dir / "clutter_summary.csv"), plots.end());
+  EXPECT_NE(std::find(plots.begin(), plots.end(), dir / "recovered_vs_clutter.png"), plots.end());
   // No masks anywhere: no IoU plots.
-  for (const fs::path& p : plots) EXPECT_EQ(p.string().find("_iou_"), std::string::npos) << p;
+  for (const fs::path& p : plots) EXPECT_EQ(p.string().find("iou_"), std::string::npos) << p;
   fs::remove_all(dir);
+}
+
+// Hand-computed: clean (static-only at 0 %) 33 dB; at 50 % static-only 30, DeSplat 32, so
+// DeSplat wins back (32 − 30) / (33 − 30) = 2/3 of what clutter cost; at 100 % 27 and 31.5:
+// 4.5 / 6 = 0.75. At 0 % clutter cost nothing: no fraction. Earlier steps and a scene
+// without a ratio do not count.
+TEST(ClutterSummary, RecoveredFractionAgainstTheCleanBaseline) {
+  std::vector<BenchPoint> points;
+  auto add = [&](const std::string& scene, double ratio, bool desplat, int64_t step, double psnr, double iou) {
+    BenchPoint p;
+    p.scene = scene, p.clutter_ratio = ratio, p.desplat = desplat, p.run = desplat ? "DeSplat" : "static-only";
+    p.step = step, p.psnr = psnr, p.mask_iou = iou, p.train_seconds = double(step) / 10;
+    points.push_back(p);
+  };
+  add("c100", 1.0, true, 7000, 31.5, 0.7);
+  add("c000", 0.0, false, 3500, 20.0, -1);  // an earlier point of the clean baseline
+  add("c000", 0.0, false, 7000, 33.0, -1);
+  add("c000", 0.0, true, 7000, 32.8, -1);
+  add("c050", 0.5, true, 7000, 32.0, 0.8);
+  add("c050", 0.5, false, 7000, 30.0, 0);
+  add("c100", 1.0, false, 7000, 27.0, 0);
+  add("other", -1, true, 7000, 10.0, 0.1);  // no clutter ratio
+  add("other", -1, false, 7000, 40.0, 0);
+  const std::vector<ClutterSummaryRow> rows = clutter_summary(points);
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0].clutter_ratio, 0.0);
+  EXPECT_TRUE(std::isnan(rows[0].recovered));
+  EXPECT_EQ(rows[0].psnr, 32.8);
+  EXPECT_EQ(rows[1].clutter_ratio, 0.5);
+  EXPECT_NEAR(rows[1].recovered, 2.0 / 3.0, 1e-12);
+  EXPECT_EQ(rows[1].mask_iou, 0.8);
+  EXPECT_EQ(rows[1].clean_psnr, 33.0);
+  EXPECT_NEAR(rows[2].recovered, 0.75, 1e-12);
+  EXPECT_EQ(rows[2].static_only_psnr, 27.0);
+  EXPECT_EQ(rows[2].train_seconds, 700.0);
+
+  const fs::path dir = temp_dir("summary");
+  write_clutter_summary_csv(dir / "s.csv", rows);
+  std::ifstream f(dir / "s.csv");
+  std::string header, zero, half;
+  std::getline(f, header), std::getline(f, zero), std::getline(f, half);
+  EXPECT_EQ(zero, "0,DeSplat,32.8,33,33,,-1,700,700");
+  EXPECT_EQ(half, "0.5,DeSplat,32,30,33,0.666667,0.8,700,700");
+  fs::remove_all(dir);
+
+  // Without a static-only run on a clutter-free scene there is nothing to measure against.
+  points.erase(points.begin() + 1, points.begin() + 3);
+  EXPECT_TRUE(clutter_summary(points).empty());
 }
 
 TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
@@ -153,7 +206,7 @@ TEST(BenchGrid, CheckedInGridsAreValid) {
     EXPECT_FALSE(g.runs.empty()) << entry.path();
     ++grids;
   }
-  EXPECT_EQ(grids, 4);  // bench_grid, bench_grid_quick, bench_grid_7k_half, clutter_grid
+  EXPECT_EQ(grids, 5);  // bench_grid, bench_grid_quick, bench_grid_7k_half, clutter_grid, clutter_tracks_grid
 }
 
 TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {

@@ -15,6 +15,7 @@
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/eval/plot.hpp"
+#include "desplat/jobs/clutter_summary.hpp"
 #include "desplat/eval/mask_metrics.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/jobs/training_run.hpp"
@@ -293,6 +294,33 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
     write_plot(file, line_plot("final test PSNR against clutter ratio", "cluttered training views (%)", "test PSNR (dB)"),
                clutter);
     written.push_back(file);
+  }
+  // Issue 17's summary: recovered fraction and mask IoU per DeSplat run against clutter.
+  const std::vector<ClutterSummaryRow> summary = clutter_summary(points);
+  if (!summary.empty()) {
+    const fs::path csv = out_dir / "clutter_summary.csv";
+    write_clutter_summary_csv(csv, summary);
+    written.push_back(csv);
+    std::vector<PlotSeries> recovered, iou;
+    for (const ClutterSummaryRow& r : summary) {
+      auto series_of = [&](std::vector<PlotSeries>& all) -> PlotSeries& {
+        if (all.empty() || all.back().label != r.run) all.push_back({r.run, {}, {}});
+        return all.back();
+      };
+      if (std::isfinite(r.recovered)) series_of(recovered).x.push_back(100 * r.clutter_ratio), recovered.back().y.push_back(r.recovered);
+      if (r.mask_iou >= 0) series_of(iou).x.push_back(100 * r.clutter_ratio), iou.back().y.push_back(r.mask_iou);
+    }
+    if (!recovered.empty()) {
+      const fs::path file = out_dir / "recovered_vs_clutter.png";
+      write_plot(file, line_plot("recovered fraction (DeSplat − static-only) / (clean − static-only)",
+                                 "cluttered training views (%)", "recovered fraction"), recovered);
+      written.push_back(file);
+    }
+    if (!iou.empty()) {
+      const fs::path file = out_dir / "iou_vs_clutter.png";
+      write_plot(file, line_plot("distractor mask IoU against clutter ratio", "cluttered training views (%)", "mask IoU"), iou);
+      written.push_back(file);
+    }
   }
   return written;
 }

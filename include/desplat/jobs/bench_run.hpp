@@ -26,7 +26,9 @@
 // interrupted benchmark keeps what it measured; resume skips finished runs),
 // <scene>_psnr_vs_time.png, <scene>_ssim_vs_time.png, <scene>_iou_vs_time.png (scenes with
 // masks, DeSplat runs), and psnr_vs_clutter.png when two or more scenes carry a clutter ratio
-// (scene.json from desplat_synth): final test PSNR per run against the scene's clutter ratio.
+// (scene.json from desplat_synth): final test PSNR per run against the scene's clutter ratio;
+// with a static-only run on a clutter-free scene also clutter_summary.csv,
+// recovered_vs_clutter.png and iou_vs_clutter.png (jobs/clutter_summary.hpp).
 // The plots are drawn by gnuplot (eval/plot.hpp); desplat_bench also writes report.html
 // (jobs/report.hpp: write_bench_report).
 #pragma once
