@@ -1,6 +1,7 @@
 // desplat_train's job: scene → trainer → progress, evaluation, checkpoints, outputs.
 #include "desplat/jobs/training_run.hpp"
 
+#include "desplat/core/statistics.hpp"
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/jobs/model_folder.hpp"
 #include "desplat/jobs/report.hpp"
@@ -78,12 +79,6 @@ class Progress {
   bool tty_;
   Clock::time_point last_{};
 };
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 json metrics_json(const std::vector<ViewMetrics>& m) {
   json per = json::array();

@@ -9,13 +9,12 @@
 
 #include "desplat/io/jpeg_end.hpp"
 #include "desplat/sfm/sfm.hpp"
+#include "sfm/quoting.hpp"
 
 namespace desplat::sfm {
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string in_quotes(const fs::path& p) { return "'" + p.string() + "'"; }
 
 [[noreturn]] void bad_images(const std::string& message) { throw SfmError(SfmErrorKind::BadImages, message); }
 

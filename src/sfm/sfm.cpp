@@ -28,6 +28,7 @@
 #include "desplat/sfm/subprocess.hpp"
 #include "sfm/match_evidence.hpp"
 #include "sfm/progress.hpp"
+#include "sfm/quoting.hpp"
 
 extern char** environ;
 
@@ -38,8 +39,6 @@ namespace {
 
 
 [[noreturn]] void fail(SfmErrorKind kind, const std::string& message) { throw SfmError(kind, message); }
-
-std::string in_quotes(const fs::path& p) { return "'" + p.string() + "'"; }
 
 std::string seconds_text(double s) {  // "0.5", "3675"
   char buf[32];

@@ -6,6 +6,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "desplat/core/statistics.hpp"
+
 namespace desplat {
 
 Effects Effects::parse(const std::string& text) {
@@ -53,13 +55,6 @@ std::string Effects::to_string() const {
 
 // --effects auto: the evidence (docs/METHOD.md §10, choosing the effects).
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 // 1.4826 × the median absolute deviation: the standard deviation for normal data, robust to
 // a few odd views.
