@@ -301,14 +301,14 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
     const fs::path csv = out_dir / "clutter_summary.csv";
     write_clutter_summary_csv(csv, summary);
     written.push_back(csv);
-    std::vector<PlotSeries> recovered, iou;
+    std::vector<PlotSeries> recovered, iou;  // rows come by run, so each run is one series
+    auto add_point = [](std::vector<PlotSeries>& all, const std::string& run, double x, double y) {
+      if (all.empty() || all.back().label != run) all.push_back({run, {}, {}});
+      all.back().x.push_back(x), all.back().y.push_back(y);
+    };
     for (const ClutterSummaryRow& r : summary) {
-      auto series_of = [&](std::vector<PlotSeries>& all) -> PlotSeries& {
-        if (all.empty() || all.back().label != r.run) all.push_back({r.run, {}, {}});
-        return all.back();
-      };
-      if (std::isfinite(r.recovered)) series_of(recovered).x.push_back(100 * r.clutter_ratio), recovered.back().y.push_back(r.recovered);
-      if (r.mask_iou >= 0) series_of(iou).x.push_back(100 * r.clutter_ratio), iou.back().y.push_back(r.mask_iou);
+      if (std::isfinite(r.recovered)) add_point(recovered, r.run, 100 * r.clutter_ratio, r.recovered);
+      if (r.mask_iou >= 0) add_point(iou, r.run, 100 * r.clutter_ratio, r.mask_iou);
     }
     if (!recovered.empty()) {
       const fs::path file = out_dir / "recovered_vs_clutter.png";
