@@ -87,9 +87,9 @@ TEST(Composite, RegularizersWithAMaskAverageOverKeptPixelsOnly) {
 
 TEST(Composite, SizeMismatchIsAnError) {
   std::vector<float> c(12), a(4), a3(3), out(12);
-  EXPECT_THROW(composite_layers({c, a}, {c, a3}, {0, 0, 0}, out), std::invalid_argument);
+  EXPECT_THROW(composite_layers({c, a}, {c, a3}, std::array<float, 3>{0, 0, 0}, out), std::invalid_argument);
   std::vector<float> short_out(9);
-  EXPECT_THROW(composite_layers({c, a}, {}, {0, 0, 0}, short_out), std::invalid_argument);
+  EXPECT_THROW(composite_layers({c, a}, {}, std::array<float, 3>{0, 0, 0}, short_out), std::invalid_argument);
 }
 
 // The whole step's gradient for both Gaussian sets: L = Σ w·clamp(C) + λ_s·mean(1 − A_s)

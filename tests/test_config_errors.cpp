@@ -41,6 +41,10 @@ TEST(ConfigErrors, UselessRatesAndSizes) {
   EXPECT_CONTAINS(error_for({{"distractors", {{"init_opacity", 1.0}}}}), "distractors.init_opacity must be in (0, 0.999]");
   EXPECT_CONTAINS(error_for({{"eval_background", {0.1, 2.0, 0.2}}}), "eval_background must be three values in [0, 1] (got 2)");
   EXPECT_CONTAINS(error_for({{"threads", -2}}), "threads must be 0 (all cores) or a positive count (got -2)");
+  EXPECT_CONTAINS(error_for({{"background", {{"sh_degree", 5}}}}), "config: background.sh_degree must be 0..4 (got 5)");
+  EXPECT_CONTAINS(error_for({{"background", {{"hidden_layers", 0}}}}), "background.hidden_layers must be 1..16 (got 0)");
+  EXPECT_CONTAINS(error_for({{"background", {{"explained_share", 1.0}}}}), "background.explained_share must be in [0, 1)");
+  EXPECT_CONTAINS(error_for({{"background", {{"lr", {{"mlp", -1}}}}}}), "background.lr.mlp must be ≥ 0");
   // Zero where zero is meaningful stays allowed: a frozen group, no regularizer, no cap.
   EXPECT_NO_THROW(config_from_json({{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
 }

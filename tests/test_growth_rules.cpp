@@ -271,11 +271,11 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
   const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
   std::vector<float> composite(9);
-  composite_layers({sc, sa}, {dc, da}, {0, 0, 0}, composite);
+  composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite);
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, {0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask);
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask);
   EXPECT_EQ(r.pixels, 3);
   EXPECT_EQ(r.static_unexplained, 2);
   // Pixel 0's composite is 0.75·0.5 = 0.375 (the distractor's black at α ¼): off by 0.145 → unexplained too.
@@ -294,12 +294,12 @@ TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
   const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
   const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
   std::vector<float> composite(9);
-  composite_layers({sc, sa}, {dc, da}, {0, 0, 0}, composite);
+  composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite);
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const std::vector<float> keep = {1, 1, 0};
   const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, {0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask, keep);
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask, keep);
   EXPECT_EQ(r.pixels, 2);
   EXPECT_EQ(r.static_unexplained, 1);     // pixel 1 only
   EXPECT_EQ(r.composite_unexplained, 1);  // pixel 0 (see above)
@@ -466,6 +466,9 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.grow_after, 0);
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
+  EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
+  EXPECT_EQ(paper.background.lambda_alpha, 0.15f);
+  EXPECT_EQ(paper.background.hidden_width, 128);
   // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
   const TrainConfig def = preset_config("default");
   EXPECT_TRUE(def.densify.stats.normalize_each_step);

@@ -291,7 +291,7 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   std::ifstream(out / "metrics.json") >> metrics;
   std::ifstream(out / "config.json") >> config;
   EXPECT_EQ(config["run"]["effects"], "distractors,appearance");
-  EXPECT_EQ(metrics["protocol"], "appearance fitted on the left half, scored on the right half");
+  EXPECT_EQ(metrics["protocol"], "per-image embeddings fitted on the left half, scored on the right half");
   for (const auto& v : metrics["views"]) EXPECT_EQ(v["protocol"], metrics["protocol"]);
 
   const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
@@ -323,7 +323,7 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   std::ifstream(root_ / "no_look" / "config.json") >> auto_config;
   EXPECT_EQ(auto_config["run"]["effects"], "distractors");
   EXPECT_EQ(auto_config["run"]["effects_chosen_by"], "auto");
-  EXPECT_EQ(auto_config["run"]["effects_evidence"]["reasons"].size(), 2u);
+  EXPECT_EQ(auto_config["run"]["effects_evidence"]["reasons"].size(), 3u);
   // … and trains exactly the model that names that set.
   const Outcome named = run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects distractors");
   ASSERT_EQ(named.exit_code, 0) << named.output;
@@ -331,7 +331,7 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   const Outcome none = run(std::string(DESPLAT_RENDER_BIN) + " --model " + (root_ / "no_look").string() + " --out " +
                            (root_ / "look3").string() + " --appearance view_1.png");
   EXPECT_EQ(none.exit_code, 1);
-  EXPECT_NE(none.output.find("was trained without an appearance model"), std::string::npos) << none.output;
+  EXPECT_NE(none.output.find("was trained without an appearance or background model"), std::string::npos) << none.output;
   const Outcome resume = run(train() + " --out " + out.string() + " --iterations 80 --threads 2 --resume --effects distractors");
   EXPECT_EQ(resume.exit_code, 1);
   EXPECT_NE(resume.output.find("trained with the appearance model but this run has it off"), std::string::npos)

@@ -72,21 +72,34 @@ int run_render(const RenderRunOptions& o) {
   const std::vector<std::string> buffer_views = distractor_views_in_checkpoint(ckpt);
   for (size_t b = 0; b < buffer_views.size(); ++b) buffer_of[buffer_views[b]] = b;
 
-  // --appearance: the chosen training photo's embedding recolours the static layer.
+  // --appearance: the chosen training photo's embeddings recolour the static layer (appearance
+  // model) and give the background behind it (background model).
   AppearanceModel look;
-  std::vector<float> embedding;
+  BackgroundModel sky;
+  std::vector<float> embedding, sky_embedding;
   if (!o.appearance.empty()) {
     const std::vector<std::string> look_views = appearance_views_in_checkpoint(ckpt);
-    if (look_views.empty())
+    const std::vector<std::string> sky_views = background_views_in_checkpoint(ckpt);
+    if (look_views.empty() && sky_views.empty())
       throw std::invalid_argument("--appearance: " + o.model_dir.string() +
-                                  " was trained without an appearance model (train with --effects …,appearance)");
-    const auto at = std::find(look_views.begin(), look_views.end(), o.appearance);
-    if (at == look_views.end())
+                                  " was trained without an appearance or background model (train with --effects "
+                                  "…,appearance or …,background)");
+    const std::vector<std::string>& names = look_views.empty() ? sky_views : look_views;
+    const auto at = std::find(names.begin(), names.end(), o.appearance);
+    if (at == names.end())
       throw std::invalid_argument("--appearance: '" + o.appearance + "' is not a training view of " +
                                   o.model_dir.string() + " (only training photos have an appearance)");
-    look = appearance_from_checkpoint(ckpt);
-    const std::span<const float> e = look.embedding(size_t(at - look_views.begin()));
-    embedding.assign(e.begin(), e.end());
+    const size_t index = size_t(at - names.begin());
+    if (!look_views.empty()) {
+      look = appearance_from_checkpoint(ckpt);
+      const std::span<const float> e = look.embedding(index);
+      embedding.assign(e.begin(), e.end());
+    }
+    if (!sky_views.empty()) {
+      sky = background_from_checkpoint(ckpt);
+      const std::span<const float> e = sky.embedding(index);
+      sky_embedding.assign(e.begin(), e.end());
+    }
   }
   AppearancePass look_pass;
   std::function<void(RasterOutput&)> recolor;
@@ -117,12 +130,18 @@ int run_render(const RenderRunOptions& o) {
     GaussianSet distractors;
     if (buffer != buffer_of.end()) distractors = distractors_from_checkpoint(ckpt, buffer->second);
     const GaussianSet* d = buffer != buffer_of.end() ? &distractors : nullptr;
-    auto render = [&](const std::array<float, 3>& bg) {
-      return render_view_layers(statics, d, view.camera, rs, bg, recolor);
-    };
     // With --alpha the layer over black is its premultiplied color; otherwise it is shown over
-    // the evaluation background. The mask does not depend on the background.
-    const ViewLayers layers = render(o.alpha ? std::array<float, 3>{0, 0, 0} : train.eval_background);
+    // the chosen photo's learned background (--appearance of a model with one) or the
+    // evaluation background. The mask does not depend on the background.
+    BackgroundPass sky_pass;
+    const bool learned_bg = !sky_embedding.empty() && !o.alpha;
+    if (learned_bg)
+      sky_pass.forward(sky, sky_embedding, view.camera,
+                       train.background.sh_degree_at(ckpt.metadata.value("step", int64_t(0))), o.threads);
+    const Background bg = o.alpha ? Background(std::array<float, 3>{0, 0, 0})
+                          : learned_bg ? sky_pass.background()
+                                       : Background(train.eval_background);
+    const ViewLayers layers = render_view_layers(statics, d, view.camera, rs, bg, recolor);
     const fs::path stem = o.out_dir / fs::path(view.name).replace_extension();
     const FloatImage& image = o.layer == "static" ? layers.statics
                               : o.layer == "distractor" ? layers.distractor
@@ -140,7 +159,8 @@ int run_render(const RenderRunOptions& o) {
     if (o.mask) write_image(stem.string() + "_mask.png", distractor_mask(layers)), ++written;
     if (o.figure) {
       const FloatImage truth = load_view_image(scene, i);
-      const FloatImage row = layers_figure_row(truth, o.alpha ? render(train.eval_background) : layers);
+      const FloatImage row = layers_figure_row(
+          truth, o.alpha ? render_view_layers(statics, d, view.camera, rs, train.eval_background, recolor) : layers);
       write_image(stem.string() + "_row.png", row), ++written;
     }
   }

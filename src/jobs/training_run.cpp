@@ -82,10 +82,12 @@ class Progress {
 
 json metrics_json(const std::vector<ViewMetrics>& m) {
   json per = json::array();
-  double psnr_sum = 0, ssim_sum = 0;
+  double psnr_sum = 0, ssim_sum = 0, right_psnr_sum = 0, right_ssim_sum = 0;
   for (const ViewMetrics& v : m) {
-    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}, {"protocol", to_string(v.protocol)}});
+    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}, {"protocol", to_string(v.protocol)},
+                   {"psnr_right_half", v.psnr_right_half}, {"ssim_right_half", v.ssim_right_half}});
     psnr_sum += v.psnr, ssim_sum += v.ssim;
+    right_psnr_sum += v.psnr_right_half, right_ssim_sum += v.ssim_right_half;
   }
   // Without test views there is no mean: null, not a PSNR of 0.
   if (m.empty()) return {{"views", per}, {"mean_psnr", nullptr}, {"mean_ssim", nullptr}, {"count", 0}};
@@ -94,18 +96,23 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
           {"mean_psnr", psnr_sum / n},
           {"mean_ssim", ssim_sum / n},
           {"count", m.size()},
-          {"protocol", to_string(m.front().protocol)}};
+          {"protocol", to_string(m.front().protocol)},
+          // Every model's right halves: compares models with and without per-image embeddings.
+          {"mean_psnr_right_half", right_psnr_sum / n},
+          {"mean_ssim_right_half", right_ssim_sum / n}};
 }
 
 // --effects auto's evidence, for config.json and metrics.json.
 json effects_evidence_json(const EffectsEvidence& ev, const std::vector<std::string>& reasons) {
   json views = json::array();
   for (const ViewEvidence& v : ev.views)
-    views.push_back({{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain}});
+    views.push_back({{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain},
+                     {"open_top_share", v.open_top_share}});
   return {{"reasons", reasons},
           {"judged_views", ev.judged_views},
           {"exposure_spread_stops", ev.exposure_spread_stops},
           {"white_balance_spread", ev.white_balance_spread},
+          {"open_top_share", ev.open_top_share},
           {"views", views}};
 }
 
@@ -364,6 +371,11 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps; scored on the right)\n",
                 config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
                 config.appearance.hidden_width, config.appearance.test_steps);
+  if (config.background.enabled)
+    std::printf("background model: embeddings of %d per training image, MLP %d x %d to spherical harmonics of degree %d; "
+                "test views are scored by the Photo Tourism protocol (embeddings fitted on the left half, %d steps)\n",
+                config.background.image_dim, config.background.hidden_layers, config.background.hidden_width,
+                config.background.sh_degree, config.appearance.test_steps);
   const json run_json = {{"static_only", opt.static_only},
                          {"preset", opt.preset},
                          {"effects", Effects::of(config).to_string()},
@@ -388,7 +400,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   json history = json::array();
   const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
                                      [](const SceneView& v) { return !v.mask_path.empty(); });
-  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_look, t_total, dist_share;
+  std::vector<double> t_fwd, t_bwd, t_loss, t_opt, t_dist, t_look, t_sky, t_total, dist_share;
   std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
@@ -412,6 +424,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       t_loss.push_back(s.timings.loss), t_opt.push_back(s.timings.optimizer);
       t_dist.push_back(s.timings.distractor), t_total.push_back(s.timings.total());
       t_look.push_back(s.timings.appearance);
+      t_sky.push_back(s.timings.background);
       dist_share.push_back(s.timings.distractor / std::max(s.timings.total(), 1e-12));
       const double n_pairs = double(std::max<int64_t>(1, s.static_pairs));
       pairs.push_back(double(s.static_pairs));
@@ -454,11 +467,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const std::vector<ViewMetrics> final_metrics = trainer.evaluate(data.test);
   for (const TrainView& v : data.test) {
     fs::path name = fs::path(v.name).replace_extension(".png");
-    // An appearance model's test view in the look fitted on its left half.
+    // A model with per-image appearance or background shows the test view in the look fitted
+    // on its left half.
     const auto scored = std::find_if(final_metrics.begin(), final_metrics.end(),
                                      [&](const ViewMetrics& m) { return m.name == v.name; });
-    const FloatImage render = trainer.render(v.camera, config.eval_background,
-                                             scored != final_metrics.end() ? scored->embedding : std::vector<float>{});
+    const FloatImage render =
+        trainer.render(v.camera, config.eval_background, scored != final_metrics.end() ? scored->look : ViewLook{});
     write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&v.image, &render}));
   }
   // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
@@ -492,6 +506,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"optimizer_and_density", median(t_opt)},
                                                      {"distractor_branch", median(t_dist)},
                                                      {"appearance", median(t_look)},
+                                                     {"background", median(t_sky)},
                                                      {"total", median(t_total)},
                                                      {"distractor_share", median(dist_share)},
                                                      {"steps_measured", t_fwd.size()},

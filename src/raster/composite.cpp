@@ -15,31 +15,39 @@ void check_layer(const Layer& l, size_t pixels, const char* what) {
 
 bool has(const Layer& l) { return !l.alpha.empty(); }
 
+void check_background(const Background& bg, size_t pixels) {
+  if (!bg.pixels.empty() && bg.pixels.size() != 3 * pixels)
+    throw std::invalid_argument("composite: the background image's size disagrees with the layers");
+}
+
 }  // namespace
 
-void composite_layers(Layer s, Layer d, const std::array<float, 3>& bg, std::span<float> out) {
+void composite_layers(Layer s, Layer d, const Background& bg, std::span<float> out) {
   const size_t pixels = s.alpha.size();
   check_layer(s, pixels, "static");
   check_layer(d, pixels, "distractor");
+  check_background(bg, pixels);
   if (out.size() != 3 * pixels) throw std::invalid_argument("composite: output size disagrees with the layers");
   const bool with_d = has(d);
   for (size_t p = 0; p < pixels; ++p) {
     const float ad = with_d ? d.alpha[p] : 0.0f;
     for (int c = 0; c < 3; ++c) {
       const float cd = with_d ? d.color[3 * p + c] : 0.0f;
-      out[3 * p + c] = std::clamp(composite_unclamped(s.color[3 * p + c], s.alpha[p], cd, ad, bg[c]), 0.0f, 1.0f);
+      out[3 * p + c] = std::clamp(composite_unclamped(s.color[3 * p + c], s.alpha[p], cd, ad, bg.at(p, c)), 0.0f, 1.0f);
     }
   }
 }
 
-void composite_layers_backward(Layer s, Layer d, const std::array<float, 3>& bg, std::span<const float> d_out,
+void composite_layers_backward(Layer s, Layer d, const Background& bg, std::span<const float> d_out,
                                const CompositeGradients& g) {
   const size_t pixels = s.alpha.size();
   check_layer(s, pixels, "static");
   check_layer(d, pixels, "distractor");
-  const bool with_d = has(d);
+  check_background(bg, pixels);
+  const bool with_d = has(d), with_bg = !g.background.empty();
   if (d_out.size() != 3 * pixels || g.static_color.size() != 3 * pixels || g.static_alpha.size() != pixels ||
-      (with_d && (g.distractor_color.size() != 3 * pixels || g.distractor_alpha.size() != pixels)))
+      (with_d && (g.distractor_color.size() != 3 * pixels || g.distractor_alpha.size() != pixels)) ||
+      (with_bg && g.background.size() != 3 * pixels))
     throw std::invalid_argument("composite backward: gradient buffer sizes disagree with the layers");
   for (size_t p = 0; p < pixels; ++p) {
     const float as = s.alpha[p], ad = with_d ? d.alpha[p] : 0.0f;
@@ -47,14 +55,16 @@ void composite_layers_backward(Layer s, Layer d, const std::array<float, 3>& bg,
     for (int c = 0; c < 3; ++c) {
       const size_t i = 3 * p + c;
       const float cs = s.color[i], cd = with_d ? d.color[i] : 0.0f;
-      const float raw = composite_unclamped(cs, as, cd, ad, bg[c]);
+      const float b = bg.at(p, c);
+      const float raw = composite_unclamped(cs, as, cd, ad, b);
       const float gc = (raw < 0.0f || raw > 1.0f) ? 0.0f : d_out[i];
       g.static_color[i] = gc * (1.0f - ad);
-      d_as -= gc * (1.0f - ad) * bg[c];
+      d_as -= gc * (1.0f - ad) * b;
       if (with_d) {
         g.distractor_color[i] = gc;
-        d_ad -= gc * (cs + (1.0f - as) * bg[c]);
+        d_ad -= gc * (cs + (1.0f - as) * b);
       }
+      if (with_bg) g.background[i] = gc * (1.0f - ad) * (1.0f - as);
     }
     g.static_alpha[p] = d_as;
     if (with_d) g.distractor_alpha[p] = d_ad;
@@ -90,14 +100,14 @@ double alpha_regularizers(Layer s, Layer d, float lambda_s, float lambda_d, std:
   return (lambda_s * sum_s + lambda_d * sum_d) / kept;
 }
 
-FloatImage composite_over_background(const RasterOutput& r, const std::array<float, 3>& background) {
+FloatImage composite_over_background(const RasterOutput& r, const Background& background) {
   FloatImage img{r.width, r.height, 3, std::vector<float>(r.color.size())};
   composite_layers({r.color, r.alpha}, {}, background, img.pixels);
   return img;
 }
 
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
-                              const RasterSettings& settings, const std::array<float, 3>& bg,
+                              const RasterSettings& settings, const Background& bg,
                               const std::function<void(RasterOutput&)>& recolor_statics) {
   const size_t pixels = size_t(camera.width) * camera.height;
   RasterOutput s, d;
@@ -117,7 +127,7 @@ ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* dis
     composite_layers(ld, {}, bg, out.distractor.pixels);
   } else {
     for (size_t p = 0; p < pixels; ++p)
-      for (int c = 0; c < 3; ++c) out.distractor.pixels[3 * p + c] = bg[c];
+      for (int c = 0; c < 3; ++c) out.distractor.pixels[3 * p + c] = bg.at(p, c);
   }
   composite_layers(ls, ld, bg, out.composite.pixels);
   return out;

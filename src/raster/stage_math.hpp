@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "desplat/core/spherical_harmonics.hpp"
+
 namespace desplat::raster {
 
 // a·b + c. For float on a CPU with FMA, one fused instruction (one rounding): the code is
@@ -161,30 +163,9 @@ template <typename T> T gaussian_sigma(T a, T b, T c, T dx, T dy) {
 // returns a reference, which keeps GCC from vectorizing the pixel loops).
 template <typename T> T clamp_alpha(T raw) { return raw < T(kAlphaMax) ? raw : T(kAlphaMax); }
 
-// --- spherical harmonics (real, degree ≤ 3, gsplat's constants and ordering) -------
-// Fills Y[0..(degree+1)²) for a unit direction d.
+// --- spherical harmonics (core/spherical_harmonics.hpp; degree ≤ 3 here) ------------
 template <typename T> void sh_basis(int degree, const Vec3<T>& d, T* Y) {
-  const T x = d[0], y = d[1], z = d[2];
-  Y[0] = T(0.2820947917738781);
-  if (degree < 1) return;
-  Y[1] = T(-0.48860251190292) * y;
-  Y[2] = T(0.48860251190292) * z;
-  Y[3] = T(-0.48860251190292) * x;
-  if (degree < 2) return;
-  const T xx = x * x, yy = y * y, zz = z * z;
-  Y[4] = T(1.092548430592079) * x * y;
-  Y[5] = T(-1.092548430592079) * y * z;
-  Y[6] = T(0.9461746957575601) * zz - T(0.3153915652525201);
-  Y[7] = T(-1.092548430592079) * x * z;
-  Y[8] = T(0.5462742152960749) * (xx - yy);
-  if (degree < 3) return;
-  Y[9] = T(-0.5900435899266435) * y * (T(3) * xx - yy);
-  Y[10] = T(2.890611442640554) * x * y * z;
-  Y[11] = (T(-2.285228997322329) * zz + T(0.4570457994644658)) * y;
-  Y[12] = z * (T(1.865881662950577) * zz - T(1.119528997770346));
-  Y[13] = (T(-2.285228997322329) * zz + T(0.4570457994644658)) * x;
-  Y[14] = T(1.445305721320277) * z * (xx - yy);
-  Y[15] = T(-0.5900435899266435) * x * (xx - T(3) * yy);
+  desplat::sh_basis<T>(degree, d[0], d[1], d[2], Y);
 }
 
 // The color of one Gaussian before clamping: SH mode Σ_k c_k Y_k(dir) + 0.5 with

@@ -9,6 +9,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "desplat/train/embedding_mlp.hpp"
 #include "desplat/train/trainable.hpp"
 
 namespace desplat {
@@ -61,26 +62,13 @@ std::vector<int> AppearanceModel::layer_sizes() const {
   return sizes;
 }
 
-size_t AppearanceModel::mlp_floats() const {
-  const std::vector<int> s = layer_sizes();
-  size_t n = 0;
-  for (size_t l = 0; l + 1 < s.size(); ++l) n += size_t(s[l + 1]) * (s[l] + 1);
-  return n;
-}
+size_t AppearanceModel::mlp_floats() const { return mlp_weight_count(layer_sizes()); }
 
 AppearanceModel::AppearanceModel(const AppearanceSettings& s, size_t views, uint64_t seed) : settings(s) {
   settings.validate();
   std::mt19937_64 rng(seed);
-  const std::vector<int> sizes = layer_sizes();
-  for (size_t l = 0; l + 1 < sizes.size(); ++l) {
-    const int in = sizes[l], out = sizes[l + 1];
-    const bool last = l + 2 == sizes.size();
-    std::uniform_real_distribution<float> u(-1.0f / std::sqrt(float(in)), 1.0f / std::sqrt(float(in)));
-    for (int k = 0; k < out * (in + 1); ++k) mlp.push_back(last ? 0.0f : u(rng));
-  }
-  std::normal_distribution<float> normal(0.0f, 0.01f);
-  image_embeddings.resize(views * size_t(settings.image_dim));
-  for (float& e : image_embeddings) e = normal(rng);
+  mlp = initial_mlp_weights(layer_sizes(), rng);
+  image_embeddings = initial_embeddings(views * size_t(settings.image_dim), rng);
   mlp_m.assign(mlp.size(), 0.0f);
   mlp_v.assign(mlp.size(), 0.0f);
   embed_m.assign(image_embeddings.size(), 0.0f);

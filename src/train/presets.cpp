@@ -25,6 +25,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.grow_after = 0;
     c.transient_points.action = TransientPointAction::keep;
     c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
+    c.background.lambda_opaque = 0.0f;  // the authors' L_bg alone (docs/METHOD.md §11)
     return c;
   }
   std::string known;

@@ -93,6 +93,19 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"appearance.lr.gaussian_embeddings", &c.lr.features},
       {"appearance.test_steps", &c.appearance.test_steps},
       {"appearance.test_lr", &c.appearance.test_lr},
+      {"background.enabled", &c.background.enabled},
+      {"background.image_dim", &c.background.image_dim},
+      {"background.hidden_width", &c.background.hidden_width},
+      {"background.hidden_layers", &c.background.hidden_layers},
+      {"background.sh_degree", &c.background.sh_degree},
+      {"background.sh_degree_interval", &c.background.sh_degree_interval},
+      {"background.lr.mlp", &c.background.lr_mlp},
+      {"background.lr.sh_rest", &c.background.lr_rest},
+      {"background.lr.image_embeddings", &c.background.lr_image},
+      {"background.lambda_alpha", &c.background.lambda_alpha},
+      {"background.lambda_opaque", &c.background.lambda_opaque},
+      {"background.explained_error", &c.background.explained_error},
+      {"background.explained_share", &c.background.explained_share},
       {"init.transient_points", &c.transient_points.action},
       {"init.transient_min_track_images", &c.transient_points.min_track_images},
       {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
@@ -162,6 +175,15 @@ void validate_config(const TrainConfig& c) {
   require("appearance.hidden_layers", c.appearance.hidden_layers, 1, 16, false, "1..16");
   require("appearance.test_steps", c.appearance.test_steps, 1, 1e6, false, "1..1,000,000");
   require("appearance.test_lr", c.appearance.test_lr, 0, kBig, true, "> 0");
+  require("background.image_dim", c.background.image_dim, 1, 4096, false, "1..4096");
+  require("background.hidden_width", c.background.hidden_width, 1, 4096, false, "1..4096");
+  require("background.hidden_layers", c.background.hidden_layers, 1, 16, false, "1..16");
+  require("background.sh_degree", c.background.sh_degree, 0, 4, false, "0..4");
+  require("background.sh_degree_interval", c.background.sh_degree_interval, 1, kBig, false, "at least 1");
+  require("background.lambda_alpha", c.background.lambda_alpha, 0, kBig, false, "≥ 0");
+  require("background.lambda_opaque", c.background.lambda_opaque, 0, kBig, false, "≥ 0");
+  require("background.explained_error", c.background.explained_error, 0, kBig, false, "≥ 0");
+  require("background.explained_share", c.background.explained_share, 0, 0.999999, false, "in [0, 1)");
   require("init.transient_min_track_images", c.transient_points.min_track_images, 0, kBig, false, "≥ 0");
   require("random_init_points", c.random_init_points, 1, 1e8, false, "1..100,000,000");
   require("threads", c.threads, 0, 4096, false, "0 (all cores) or a positive count");
@@ -176,7 +198,9 @@ void validate_config(const TrainConfig& c) {
       {"distractors.lr.opacity_logits", c.distractors.lr.opacity_logits},
       {"distractors.lr.rgb", c.distractors.lr.colors_dc},
       {"appearance.lr.mlp", c.appearance.lr_mlp}, {"appearance.lr.image_embeddings", c.appearance.lr_image},
-      {"appearance.lr.gaussian_embeddings", c.lr.features}};
+      {"appearance.lr.gaussian_embeddings", c.lr.features},
+      {"background.lr.mlp", c.background.lr_mlp}, {"background.lr.sh_rest", c.background.lr_rest},
+      {"background.lr.image_embeddings", c.background.lr_image}};
   for (const auto& [name, rate] : rates) require(name, rate, 0, kBig, false, "≥ 0 (0 freezes the group)");
   // Weights, thresholds and sizes.
   require("ssim_lambda", c.ssim_lambda, 0, 1, false, "in [0, 1]");

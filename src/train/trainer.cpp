@@ -11,6 +11,7 @@
 #include <omp.h>
 #include <stdexcept>
 
+#include "desplat/train/background.hpp"
 #include "desplat/train/init.hpp"
 #include "desplat/train/loss.hpp"
 #include "desplat/train/mask_coherence.hpp"
@@ -136,6 +137,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     view_seed_due.assign(data_.train.size(), 0);
   }
   if (config_.appearance.enabled) appearance_ = AppearanceModel(config_.appearance, data_.train.size(), rng_());
+  if (config_.background.enabled) background_ = BackgroundModel(config_.background, data_.train.size(), rng_());
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
 }
@@ -219,10 +221,10 @@ StepStats Trainer::step() {
   const std::span<const float> keep = keep_at(view, factor);
   const size_t pixels = size_t(cam.width) * cam.height;
   const RasterSettings rs = raster_settings();
-  std::array<float, 3> bg = config_.eval_background;
-  if (config_.random_background) {
+  std::array<float, 3> bg_color = config_.eval_background;
+  if (config_.random_background && !config_.background.enabled) {
     std::uniform_real_distribution<float> u(0.0f, 1.0f);
-    bg = {u(rng_), u(rng_), u(rng_)};
+    bg_color = {u(rng_), u(rng_), u(rng_)};
   }
   // A view whose distractors were all culled has no second pass at all.
   TrainableGaussians* distractors = nullptr;
@@ -232,7 +234,14 @@ StepStats Trainer::step() {
   const AppearanceModel* look = config_.appearance.enabled ? &appearance_ : nullptr;
   const std::span<const float> embedding = look ? appearance_.embedding(size_t(view)) : std::span<const float>();
 
-  // 1. Render each layer.
+  // 1. Render each layer, and the background behind them.
+  const bool learned_bg = config_.background.enabled;
+  if (learned_bg)
+    profile.time(&StepTimings::background, [&] {
+      background_pass_.forward(background_, background_.embedding(size_t(view)), cam,
+                               config_.background.sh_degree_at(step_), config_.threads);
+    });
+  const Background bg = learned_bg ? background_pass_.background() : Background(bg_color);
   profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs, look, embedding); });
   const double appearance_forward = static_pass_.appearance_seconds;
   stats.static_pairs = static_pass_.forward.evaluated_pairs;
@@ -253,14 +262,20 @@ StepStats Trainer::step() {
     static_pass_.d_alpha.resize(pixels);
     distractor_pass_.d_color.resize(distractors ? 3 * pixels : 0);
     distractor_pass_.d_alpha.resize(distractors ? pixels : 0);
+    background_pass_.d_image.resize(learned_bg ? 3 * pixels : 0);
     composite_layers_backward(statics, distractor, bg, d_composite_,
                               {static_pass_.d_color, static_pass_.d_alpha, distractor_pass_.d_color,
-                               distractor_pass_.d_alpha});
+                               distractor_pass_.d_alpha, background_pass_.d_image});
     stats.loss = loss.loss;
+    // With a learned background the static layer need not be opaque everywhere (the sky is
+    // the background's): L_bg replaces λ_s (docs/METHOD.md §11).
     if (config_.distractors.enabled && config_.distractors.regularize)
-      stats.loss += alpha_regularizers(statics, distractor, config_.distractors.lambda_static,
+      stats.loss += alpha_regularizers(statics, distractor, learned_bg ? 0.0f : config_.distractors.lambda_static,
                                        config_.distractors.lambda_distractor, static_pass_.d_alpha,
                                        distractor_pass_.d_alpha, keep);
+    if (learned_bg)
+      stats.loss += background_alpha_loss(background_pass_.image, target.pixels, statics, distractor, cam.width,
+                                          cam.height, config_.background, static_pass_.d_alpha, keep);
     if (distractors && config_.distractors.regularize && config_.distractors.lambda_mask_tv > 0)
       stats.loss += mask_total_variation(distractor.alpha, cam.width, cam.height,
                                          config_.distractors.lambda_mask_tv, distractor_pass_.d_alpha, keep);
@@ -289,6 +304,15 @@ StepStats Trainer::step() {
       std::copy_n(static_pass_.appearance.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
       if (!appearance_.adam_update(static_pass_.appearance.d_mlp, d_embeddings_))
         warn("step " + std::to_string(step_) + ": the appearance model's gradient is not finite; its update was skipped");
+    });
+  if (learned_bg)
+    profile.time(&StepTimings::background, [&] {
+      background_pass_.backward(background_, background_.embedding(size_t(view)), cam, config_.threads);
+      const size_t dim = size_t(config_.background.image_dim);
+      d_embeddings_.assign(background_.image_embeddings.size(), 0.0f);
+      std::copy_n(background_pass_.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
+      if (!background_.adam_update(background_pass_.d_mlp, d_embeddings_))
+        warn("step " + std::to_string(step_) + ": the background model's gradient is not finite; its update was skipped");
     });
   if (distractors)
     profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
@@ -445,52 +469,75 @@ int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std
   return bad;
 }
 
-FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background,
-                           std::span<const float> embedding) const {
+FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background, const ViewLook& look) const {
   LayerPass pass;
-  const bool look = config_.appearance.enabled && !embedding.empty();
-  pass.render(gaussians_, camera, raster_settings(), look ? &appearance_ : nullptr, embedding);
-  return composite_over_background(pass.forward, background);
+  const bool recolor = config_.appearance.enabled && !look.appearance.empty();
+  pass.render(gaussians_, camera, raster_settings(), recolor ? &appearance_ : nullptr, look.appearance);
+  if (!config_.background.enabled || look.background.empty()) return composite_over_background(pass.forward, background);
+  BackgroundPass sky;
+  sky.forward(background_, look.background, camera, config_.background.sh_degree_at(step_), config_.threads);
+  return composite_over_background(pass.forward, sky.background());
 }
 
 const char* to_string(EvalProtocol p) {
-  return p == EvalProtocol::appearance_halves ? "appearance fitted on the left half, scored on the right half"
+  return p == EvalProtocol::appearance_halves ? "per-image embeddings fitted on the left half, scored on the right half"
                                                : "full image";
 }
 
-std::vector<float> Trainer::fit_embedding(const TrainView& view, std::span<const float> fit) const {
-  const AppearanceSettings& as = config_.appearance;
-  if (!as.enabled) throw std::invalid_argument("fit_embedding: this model has no appearance model");
+ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) const {
+  if (!has_per_image_models()) throw std::invalid_argument("fit_look: this model has no per-image appearance or background");
   const Camera& cam = view.camera;
-  const size_t pixels = size_t(cam.width) * cam.height, dim = size_t(as.image_dim);
-  if (fit.size() != pixels) throw std::invalid_argument("fit_embedding: the fit mask does not match view " + view.name);
+  const size_t pixels = size_t(cam.width) * cam.height;
+  if (fit.size() != pixels) throw std::invalid_argument("fit_look: the fit mask does not match view " + view.name);
   std::vector<float> keep(fit.begin(), fit.end());
   if (!view.keep.empty())
     for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
-  // Start from the mean training appearance.
-  std::vector<float> e(dim, 0.0f), m(dim, 0.0f), v(dim, 0.0f);
-  for (size_t j = 0; j < appearance_.views(); ++j)
-    for (size_t k = 0; k < dim; ++k) e[k] += appearance_.embedding(j)[k] / float(appearance_.views());
+  const bool recolor = config_.appearance.enabled, sky = config_.background.enabled;
+  // Start from the mean training look.
+  ViewLook look;
+  if (recolor) {
+    const size_t dim = size_t(config_.appearance.image_dim);
+    look.appearance.assign(dim, 0.0f);
+    for (size_t j = 0; j < appearance_.views(); ++j)
+      for (size_t k = 0; k < dim; ++k) look.appearance[k] += appearance_.embedding(j)[k] / float(appearance_.views());
+  }
+  if (sky) look.background = background_.mean_embedding();
+  std::vector<float> m_a(look.appearance.size(), 0.0f), v_a(m_a), m_b(look.background.size(), 0.0f), v_b(m_b);
   const RasterSettings rs = raster_settings();
+  const int bg_degree = config_.background.sh_degree_at(step_);
   const AdamSettings adam;
+  const AppearanceSettings& as = config_.appearance;
   LayerPass pass;
+  BackgroundPass sky_pass;
   std::vector<float> composite(3 * pixels), d_composite(3 * pixels);
+  auto finite = [](const std::vector<float>& g) { return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); }); };
   for (int step = 1; step <= as.test_steps; ++step) {
-    pass.render(gaussians_, cam, rs, &appearance_, e);
-    composite_layers(pass.layer(), Layer{}, config_.eval_background, composite);
+    pass.render(gaussians_, cam, rs, recolor ? &appearance_ : nullptr, look.appearance);
+    if (sky) sky_pass.forward(background_, look.background, cam, bg_degree, config_.threads);
+    const Background bg = sky ? sky_pass.background() : Background(config_.eval_background);
+    composite_layers(pass.layer(), Layer{}, bg, composite);
     photometric_loss(composite, view.image.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite, keep);
     pass.d_color.resize(3 * pixels);
     pass.d_alpha.resize(pixels);
-    composite_layers_backward(pass.layer(), Layer{}, config_.eval_background, d_composite,
-                              {pass.d_color, pass.d_alpha, {}, {}});
-    pass.backward(gaussians_, cam, rs, &appearance_, e);
-    const std::vector<float>& grad = pass.appearance.d_embedding;
-    if (!std::all_of(grad.begin(), grad.end(), [](float g) { return std::isfinite(g); })) break;
+    sky_pass.d_image.resize(sky ? 3 * pixels : 0);
+    composite_layers_backward(pass.layer(), Layer{}, bg, d_composite,
+                              {pass.d_color, pass.d_alpha, {}, {}, sky_pass.d_image});
     const double bc1 = 1.0 - std::pow(double(adam.beta1), step);
-    const float sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
-    adam_span(e.data(), m.data(), v.data(), grad.data(), dim, float(as.test_lr / bc1), sqrt_bc2, adam);
+    const float step_size = float(as.test_lr / bc1), sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
+    if (recolor) {
+      pass.backward(gaussians_, cam, rs, &appearance_, look.appearance);
+      const std::vector<float>& grad = pass.appearance.d_embedding;
+      if (!finite(grad)) break;
+      adam_span(look.appearance.data(), m_a.data(), v_a.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
+    }
+    if (sky) {
+      sky_pass.backward(background_, look.background, cam, config_.threads);
+      const std::vector<float>& grad = sky_pass.d_embedding;
+      if (!finite(grad)) break;
+      adam_span(look.background.data(), m_b.data(), v_b.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
+    }
   }
-  return e;
+  return look;
 }
 
 ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>& background) const {
@@ -501,20 +548,20 @@ ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>&
     recolor = [&](RasterOutput& fw) {
       pass.forward(appearance_, appearance_.embedding(train_view), gaussians_.params, fw, config_.threads);
     };
-  return render_view_layers(gaussians_.params, d, data_.train.at(train_view).camera, raster_settings(), background,
-                            recolor);
+  const Camera& camera = data_.train.at(train_view).camera;
+  BackgroundPass sky;
+  if (config_.background.enabled)  // and over its own background
+    sky.forward(background_, background_.embedding(train_view), camera, config_.background.sh_degree_at(step_),
+                config_.threads);
+  const Background bg = config_.background.enabled ? sky.background() : Background(background);
+  return render_view_layers(gaussians_.params, d, camera, raster_settings(), bg, recolor);
 }
 
 std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
   std::vector<ViewMetrics> out;
   for (const TrainView& v : views) {
-    if (!config_.appearance.enabled) {
-      const FloatImage img = render(v.camera, config_.eval_background);
-      out.push_back({v.name, psnr(img.pixels, v.image.pixels, v.keep),
-                     ssim(img.pixels, v.image.pixels, img.width, img.height, v.keep), EvalProtocol::full_image, {}});
-      continue;
-    }
-    // Photo Tourism: fit on the left half, score the right half (and the view's own mask).
+    // The halves: the right one is scored under either protocol; the left one is where the
+    // Photo Tourism protocol fits a model's embeddings (the view's own mask applies to both).
     const int w = v.camera.width, h = v.camera.height;
     std::vector<float> left(size_t(w) * h, 0.0f), right(size_t(w) * h, 0.0f);
     for (int y = 0; y < h; ++y)
@@ -523,10 +570,18 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
         const float keep = v.keep.empty() ? 1.0f : v.keep[p];
         (x < w / 2 ? left : right)[p] = keep;
       }
-    ViewMetrics m{v.name, 0, 0, EvalProtocol::appearance_halves, fit_embedding(v, left)};
-    const FloatImage img = render(v.camera, config_.eval_background, m.embedding);
-    m.psnr = psnr(img.pixels, v.image.pixels, right);
-    m.ssim = ssim(img.pixels, v.image.pixels, w, h, right);
+    ViewMetrics m;
+    m.name = v.name;
+    if (has_per_image_models()) m.protocol = EvalProtocol::appearance_halves, m.look = fit_look(v, left);
+    const FloatImage img = render(v.camera, config_.eval_background, m.look);
+    m.psnr_right_half = psnr(img.pixels, v.image.pixels, right);
+    m.ssim_right_half = ssim(img.pixels, v.image.pixels, w, h, right);
+    if (m.protocol == EvalProtocol::appearance_halves) {
+      m.psnr = m.psnr_right_half, m.ssim = m.ssim_right_half;
+    } else {
+      m.psnr = psnr(img.pixels, v.image.pixels, v.keep);
+      m.ssim = ssim(img.pixels, v.image.pixels, w, h, v.keep);
+    }
     out.push_back(std::move(m));
   }
   return out;

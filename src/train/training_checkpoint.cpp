@@ -5,7 +5,9 @@
 // "adam_step"/"statistics_empty"/"feature_dim" for the static set, and with the appearance model
 // "appearance/mlp", "appearance/image_embeddings" and their "appearance/adam_m/…", "…/adam_v/…"
 // with metadata "appearance": {"views", "image_dim", "fourier_frequencies", "hidden_width",
-// "hidden_layers", "adam_step"}; "distractors": {"views": [names],
+// "hidden_layers", "adam_step"}; with the background model the same under "background/…" and
+// metadata "background": {"views", "image_dim", "hidden_width", "hidden_layers", "sh_degree",
+// "adam_step"}; "distractors": {"views": [names],
 // "adam_step": [...], "statistics_empty": [...]} for the per-view sets.
 #include "desplat/train/training_checkpoint.hpp"
 
@@ -13,6 +15,30 @@ namespace desplat {
 namespace {
 
 std::string distractor_prefix(size_t view) { return "distractor/" + std::to_string(view); }
+
+// The arrays of a per-image model (AppearanceModel, BackgroundModel): "P/mlp",
+// "P/image_embeddings" and their "P/adam_m/…", "P/adam_v/…".
+template <class Model> void put_per_image_model(Checkpoint& c, const std::string& prefix, const Model& m) {
+  const uint64_t views = m.views(), dim = uint64_t(m.settings.image_dim), weights = m.mlp.size();
+  c.put(prefix + "/mlp", {weights}, m.mlp);
+  c.put(prefix + "/adam_m/mlp", {weights}, m.mlp_m);
+  c.put(prefix + "/adam_v/mlp", {weights}, m.mlp_v);
+  c.put(prefix + "/image_embeddings", {views, dim}, m.image_embeddings);
+  c.put(prefix + "/adam_m/image_embeddings", {views, dim}, m.embed_m);
+  c.put(prefix + "/adam_v/image_embeddings", {views, dim}, m.embed_v);
+}
+
+// `m.settings` must be set (it gives the shapes).
+template <class Model> void get_per_image_model(const Checkpoint& c, const std::string& prefix, size_t views, Model& m) {
+  const uint64_t weights = m.mlp_floats(), dim = uint64_t(m.settings.image_dim);
+  m.mlp = c.get<float>(prefix + "/mlp", {weights});
+  m.mlp_m = c.get<float>(prefix + "/adam_m/mlp", {weights});
+  m.mlp_v = c.get<float>(prefix + "/adam_v/mlp", {weights});
+  m.image_embeddings = c.get<float>(prefix + "/image_embeddings", {views, dim});
+  m.embed_m = c.get<float>(prefix + "/adam_m/image_embeddings", {views, dim});
+  m.embed_v = c.get<float>(prefix + "/adam_v/image_embeddings", {views, dim});
+  m.adam_step = c.metadata.at(prefix).at("adam_step").get<int64_t>();
+}
 
 void put_trainable(Checkpoint& c, const std::string& prefix, const TrainableGaussians& g) {
   const uint64_t n = g.size();
@@ -89,13 +115,20 @@ Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extr
                                 {"hidden_width", as.hidden_width},
                                 {"hidden_layers", as.hidden_layers},
                                 {"adam_step", look.adam_step}};
-    const uint64_t views = look.views(), dim = uint64_t(as.image_dim), weights = look.mlp.size();
-    c.put("appearance/mlp", {weights}, look.mlp);
-    c.put("appearance/adam_m/mlp", {weights}, look.mlp_m);
-    c.put("appearance/adam_v/mlp", {weights}, look.mlp_v);
-    c.put("appearance/image_embeddings", {views, dim}, look.image_embeddings);
-    c.put("appearance/adam_m/image_embeddings", {views, dim}, look.embed_m);
-    c.put("appearance/adam_v/image_embeddings", {views, dim}, look.embed_v);
+    put_per_image_model(c, "appearance", look);
+  }
+  if (t.config().background.enabled) {
+    const BackgroundModel& sky = t.background();
+    nlohmann::json names = nlohmann::json::array();
+    for (const TrainView& v : t.data().train) names.push_back(v.name);
+    const BackgroundSettings& bs = sky.settings;
+    c.metadata["background"] = {{"views", names},
+                                {"image_dim", bs.image_dim},
+                                {"hidden_width", bs.hidden_width},
+                                {"hidden_layers", bs.hidden_layers},
+                                {"sh_degree", bs.sh_degree},
+                                {"adam_step", sky.adam_step}};
+    put_per_image_model(c, "background", sky);
   }
   c.metadata["view_order_pos"] = t.view_order_pos;
   c.metadata["rng"] = save_rng_state(t.rng());
@@ -143,14 +176,33 @@ AppearanceModel appearance_from_checkpoint(const Checkpoint& c) {
   s.hidden_layers = m.at("hidden_layers").get<int>();
   AppearanceModel model;
   model.settings = s;
-  const uint64_t weights = model.mlp_floats(), dim = uint64_t(s.image_dim);
-  model.mlp = c.get<float>("appearance/mlp", {weights});
-  model.mlp_m = c.get<float>("appearance/adam_m/mlp", {weights});
-  model.mlp_v = c.get<float>("appearance/adam_v/mlp", {weights});
-  model.image_embeddings = c.get<float>("appearance/image_embeddings", {views.size(), dim});
-  model.embed_m = c.get<float>("appearance/adam_m/image_embeddings", {views.size(), dim});
-  model.embed_v = c.get<float>("appearance/adam_v/image_embeddings", {views.size(), dim});
-  model.adam_step = m.at("adam_step").get<int64_t>();
+  get_per_image_model(c, "appearance", views.size(), model);
+  return model;
+}
+
+std::vector<std::string> background_views_in_checkpoint(const Checkpoint& c) {
+  if (!c.metadata.contains("background")) return {};
+  return c.metadata.at("background").at("views").get<std::vector<std::string>>();
+}
+
+BackgroundModel background_from_checkpoint(const Checkpoint& c) {
+  const std::vector<std::string> views = background_views_in_checkpoint(c);
+  if (views.empty()) throw CheckpointError(c.source.string() + ": the model was trained without a background model");
+  const nlohmann::json& m = c.metadata.at("background");
+  BackgroundSettings s;
+  s.enabled = true;
+  s.image_dim = m.at("image_dim").get<int>();
+  s.hidden_width = m.at("hidden_width").get<int>();
+  s.hidden_layers = m.at("hidden_layers").get<int>();
+  s.sh_degree = m.at("sh_degree").get<int>();
+  try {
+    s.validate();
+  } catch (const std::invalid_argument& e) {
+    throw CheckpointError(c.source.string() + ": its background model is damaged: " + e.what());
+  }
+  BackgroundModel model;
+  model.settings = s;
+  get_per_image_model(c, "background", views.size(), model);
   return model;
 }
 
@@ -204,6 +256,31 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
                             std::to_string(trainer.data().train.size()));
     look.settings = want;  // rates and test-time settings are the run's
     trainer.mutable_appearance() = std::move(look);
+  }
+  // The background model likewise.
+  const bool ckpt_sky = c.metadata.contains("background"), run_sky = trainer.config().background.enabled;
+  if (ckpt_sky != run_sky)
+    throw CheckpointError(c.source.string() + ": the checkpoint was trained " + (ckpt_sky ? "with" : "without") +
+                          " the background model but this run has it " + (run_sky ? "on" : "off") +
+                          " (--effects must match the run being resumed)");
+  if (run_sky) {
+    BackgroundModel sky = background_from_checkpoint(c);
+    const BackgroundSettings& want = trainer.config().background;
+    const BackgroundSettings& got = sky.settings;
+    if (got.image_dim != want.image_dim || got.hidden_width != want.hidden_width ||
+        got.hidden_layers != want.hidden_layers || got.sh_degree != want.sh_degree)
+      throw CheckpointError(c.source.string() + ": the checkpoint's background model has image embeddings of " +
+                            std::to_string(got.image_dim) + ", " + std::to_string(got.hidden_layers) +
+                            " hidden layers of " + std::to_string(got.hidden_width) + " and SH degree " +
+                            std::to_string(got.sh_degree) + "; this run asks for " + std::to_string(want.image_dim) +
+                            ", " + std::to_string(want.hidden_layers) + " of " + std::to_string(want.hidden_width) +
+                            " and " + std::to_string(want.sh_degree));
+    if (sky.views() != trainer.data().train.size())
+      throw CheckpointError(c.source.string() + ": the checkpoint's background model has embeddings for " +
+                            std::to_string(sky.views()) + " training views, this run has " +
+                            std::to_string(trainer.data().train.size()));
+    sky.settings = want;  // rates and L_bg's settings are the run's
+    trainer.mutable_background() = std::move(sky);
   }
   get_trainable(c, "static", g);
   g.adam_step = c.metadata.at("adam_step").get<int64_t>();

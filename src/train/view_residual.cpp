@@ -8,7 +8,7 @@
 namespace desplat {
 
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
-                                   std::span<const float> target, const std::array<float, 3>& bg, float tolerance,
+                                   std::span<const float> target, const Background& bg, float tolerance,
                                    float lambda_explained, std::span<float> d_distractor_alpha,
                                    std::vector<uint8_t>* mask, std::span<const float> keep) {
   const size_t pixels = statics.alpha.size();
@@ -33,7 +33,7 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     float static_err = 0, composite_err = 0;
     const float transmittance = 1.0f - statics.alpha[p];
     for (int c = 0; c < 3; ++c) {
-      const float s = std::clamp(statics.color[3 * p + c] + transmittance * bg[c], 0.0f, 1.0f);
+      const float s = std::clamp(statics.color[3 * p + c] + transmittance * bg.at(p, c), 0.0f, 1.0f);
       static_err += std::abs(s - target[3 * p + c]);
       composite_err += std::abs(composite[3 * p + c] - target[3 * p + c]);
     }

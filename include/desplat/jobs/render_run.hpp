@@ -19,7 +19,8 @@ struct RenderRunOptions {
   bool alpha = false;   // write the layer as straight RGBA (alpha = the layer's coverage)
   bool figure = false;  // also <name>_row.png: truth | static | distractor | composite | mask
   // A training view's name: the static layer in that photo's appearance (models trained with
-  // --effects …,appearance). Empty: the plain colours (what point_cloud.ply holds).
+  // --effects …,appearance) over that photo's learned background (…,background). Empty: the
+  // plain colours (what point_cloud.ply holds) over the evaluation background.
   std::string appearance;
   int threads = 0;
 };
@@ -27,7 +28,8 @@ struct RenderRunOptions {
 // Writes <out_dir>/<image name>.png per view (plus the extras asked for) and returns the
 // number of files written. Throws with a clear message for bad input (missing model
 // files, unknown view names, a layer, mask or figure asked of a view that has no
-// distractors or of a static-only model, --appearance of a model without one or naming a
+// distractors or of a static-only model, --appearance of a model without either per-image
+// model or naming a
 // view that is not a training view).
 int run_render(const RenderRunOptions& options);
 

@@ -4,6 +4,8 @@
 //
 //   C = C_d + (1 − A_d)·C_s + (1 − A_d)(1 − A_s)·bg,   clamped to [0, 1] per channel.
 //
+// The background bg is one colour (training's random one, the evaluation colour) or one per
+// pixel (the background model's sky, docs/METHOD.md §11).
 // Colors are the rasterizer's premultiplied [H, W, 3] images, alphas its [H, W]
 // accumulated alphas. A view without distractors (every test view, or a training view
 // whose distractors were all culled) is the same formula with C_d = 0, A_d = 0:
@@ -33,17 +35,27 @@ struct Layer {
   std::span<const float> color, alpha;
 };
 
+// What lies behind both layers: one colour, or one per pixel. Does not own `pixels`.
+struct Background {
+  std::array<float, 3> color{0, 0, 0};
+  std::span<const float> pixels;  // [P·3] when not empty (then `color` is unused)
+  Background(const std::array<float, 3>& c) : color(c) {}  // NOLINT: a colour is a background
+  explicit Background(std::span<const float> per_pixel) : pixels(per_pixel) {}
+  float at(size_t pixel, int channel) const { return pixels.empty() ? color[channel] : pixels[3 * pixel + channel]; }
+};
+
 // out[P·3] = the clamped composite of `distractor` over `statics` over `background`.
-void composite_layers(Layer statics, Layer distractor, const std::array<float, 3>& background,
-                      std::span<float> out);
+void composite_layers(Layer statics, Layer distractor, const Background& background, std::span<float> out);
 
 // Gradients of a loss through composite_layers, given ∂L/∂C in `d_out` [P·3]. Where the
 // clamp is active the gradient is zero (as PyTorch's clamp). Outputs are overwritten and
-// must be sized [P·3] / [P]; the distractor ones may be empty when there is no layer.
+// must be sized [P·3] / [P]; the distractor ones may be empty when there is no layer, and
+// `background` [P·3] is filled only when given (a per-pixel background that is learned).
 struct CompositeGradients {
   std::span<float> static_color, static_alpha, distractor_color, distractor_alpha;
+  std::span<float> background = {};
 };
-void composite_layers_backward(Layer statics, Layer distractor, const std::array<float, 3>& background,
+void composite_layers_backward(Layer statics, Layer distractor, const Background& background,
                                std::span<const float> d_out, const CompositeGradients& grads);
 
 // λ_s·mean(1 − A_s) + λ_d·mean(A_d) (docs/METHOD.md §4): pushes the static layer to be
@@ -56,7 +68,7 @@ double alpha_regularizers(Layer statics, Layer distractor, float lambda_static, 
                           std::span<const float> keep = {});
 
 // The image a viewer sees of a single render: C + (1 − A)·background, clamped.
-FloatImage composite_over_background(const RasterOutput& render, const std::array<float, 3>& background);
+FloatImage composite_over_background(const RasterOutput& render, const Background& background);
 
 // Every layer of one view as images over `background`, for figures and desplat_render.
 struct ViewLayers {
@@ -72,7 +84,7 @@ struct ViewLayers {
 // blended and may change the visible Gaussians' colours (RasterOutput::rgb): the appearance
 // model's hook (docs/METHOD.md §10).
 ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* distractors, const Camera& camera,
-                              const RasterSettings& settings, const std::array<float, 3>& background,
+                              const RasterSettings& settings, const Background& background,
                               const std::function<void(RasterOutput&)>& recolor_statics = {});
 
 // A pixel is a distractor pixel where A_d exceeds this (docs/METHOD.md §8).

@@ -14,10 +14,11 @@ namespace desplat {
 struct Effects {
   bool distractors = false;  // per-view distractor Gaussians (DeSplat's decomposition)
   bool appearance = false;   // per-image appearance embeddings and MLP (static colours)
+  bool background = false;   // per-image background model behind both layers (sky)
 
-  // "none" or a comma-separated list of "distractors" and "appearance", in any order. Throws
-  // std::invalid_argument naming the unknown or unavailable entry ("background" is not
-  // available yet; "auto" is the caller's: choose_effects below).
+  // "none" or a comma-separated list of "distractors", "appearance" and "background", in any
+  // order. Throws std::invalid_argument naming the unknown entry ("auto" is the caller's:
+  // choose_effects below).
   static Effects parse(const std::string& text);
   static Effects of(const TrainConfig& config);
   void apply(TrainConfig& config) const;
@@ -27,9 +28,9 @@ struct Effects {
 // --effects auto (docs/METHOD.md §10, choosing the effects): evidence gathered before training
 // from the SfM tracks. Every track element of a training view is a sample: the photo's colour
 // at the point's projection against the point's own colour (COLMAP's mean over its track).
-// Only the appearance model is decided from evidence, and only ever turned on: distractors
-// stay as the preset and --config set them (no test for transients before training has
-// measured reliable yet: docs/bench/issue15_effects.md).
+// The appearance and background models are decided from evidence, and only ever turned on:
+// distractors stay as the preset and --config set them (no test for transients before
+// training has measured reliable yet: docs/bench/issue15_effects.md).
 struct EffectsRules {
   // Appearance when the views' brightness gains (the median log₂ ratio of their samples, mean
   // over RGB) spread by more than this many stops (robust standard deviation over views), or
@@ -39,12 +40,22 @@ struct EffectsRules {
   float exposure_spread_stops = 0.2f;
   float white_balance_spread = 0.05f;
   int min_samples_per_view = 30;  // fewer: the view gives no evidence
+  // Background when, in the median judged view, the cells of a sky_grid-wide grid that hold no
+  // SfM sample, are smooth (mean |Laplacian| of 4×4-pixel luminance means ≤ sky_smooth_ratio ×
+  // the median of the view's cells that hold samples) and connect to the frame's top edge through such cells
+  // cover more than sky_share of the frame: a featureless region above the scene that no
+  // surface explains is sky (or something as far and as plain), which only the background
+  // model can represent.
+  float sky_share = 0.1f;
+  int sky_grid = 16;
+  float sky_smooth_ratio = 0.25f;
 };
 
 struct ViewEvidence {
   std::string name;
   int samples = 0;
   std::array<float, 3> log2_gain{0, 0, 0};  // per channel, the median log₂(photo / point colour)
+  float open_top_share = 0;  // share of the frame in sky-like grid cells connected to the top edge
 };
 
 struct EffectsEvidence {
@@ -53,13 +64,16 @@ struct EffectsEvidence {
   double exposure_spread_stops = 0, white_balance_spread = 0;
   bool appearance = false;          // the evidence calls for the appearance model
   std::string reason;               // one sentence: why appearance is called for or not
+  double open_top_share = 0;        // median over judged views
+  bool background = false;          // the evidence calls for the background model
+  std::string background_reason;    // one sentence: why the background model is called for or not
 };
 
 // Throws std::invalid_argument when the track information does not match the points.
 EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& rules = {});
 
-// --effects auto: `configured` (the preset's and --config's set) plus appearance when
-// `evidence` calls for it; every line of `why` says why an effect is on or off.
+// --effects auto: `configured` (the preset's and --config's set) plus appearance and
+// background when `evidence` calls for them; every line of `why` says why an effect is on or off.
 Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why);
 
 }  // namespace desplat

@@ -17,6 +17,7 @@
 
 #include "desplat/core/camera.hpp"
 #include "desplat/train/appearance.hpp"
+#include "desplat/train/background.hpp"
 #include "desplat/raster/composite.hpp"
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
@@ -65,6 +66,9 @@ struct TrainConfig {
   DistractorSettings distractors;
   TransientPointSettings transient_points;  // what initialization does with transient sparse points
   AppearanceSettings appearance;            // per-image appearance of the static layer (off: plain colours)
+  // The learned background behind both layers (background.hpp); when on it replaces the
+  // random training background and the static opacity regularizer λ_s (L_bg takes its place).
+  BackgroundSettings background;
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
   int random_init_points = 50000;  // used when the scene has no points
@@ -90,10 +94,11 @@ struct TrainConfig {
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
 // work of the view's distractor branch (its forward, backward, Adam and refinement);
 // `loss` includes the compositing and its gradient.
-// `appearance` is the appearance model's forward, backward and Adam (docs/METHOD.md §10).
+// `appearance` is the appearance model's forward, backward and Adam (docs/METHOD.md §10),
+// `background` the background model's (§11).
 struct StepTimings {
-  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0, appearance = 0;
-  double total() const { return forward + backward + loss + optimizer + distractor + appearance; }
+  double forward = 0, backward = 0, loss = 0, optimizer = 0, distractor = 0, appearance = 0, background = 0;
+  double total() const { return forward + backward + loss + optimizer + distractor + appearance + background; }
 };
 
 // The timing blocks of one step, in one place: each block's wall time goes to one field of
@@ -171,15 +176,26 @@ struct StepStats {
 // How a test view was scored.
 enum class EvalProtocol {
   full_image,          // the render (plain colours) against the whole photo
-  appearance_halves,   // Photo Tourism: the view's embedding fitted on the left half, scored on the right
+  appearance_halves,   // Photo Tourism: the view's embeddings fitted on the left half, scored on the right
 };
 const char* to_string(EvalProtocol p);
+
+// A photo's look under the per-image models: its appearance embedding ([image_dim] of the
+// appearance model) and its background embedding (of the background model); either empty
+// when that model is off or not asked for.
+struct ViewLook {
+  std::vector<float> appearance, background;
+};
 
 struct ViewMetrics {
   std::string name;
   double psnr = 0, ssim = 0;
   EvalProtocol protocol = EvalProtocol::full_image;
-  std::vector<float> embedding;  // appearance_halves: the fitted embedding (renders the view in its look)
+  // The same render scored on the right half only, whatever the protocol: the number that
+  // compares a model with per-image embeddings to one without (equal to psnr/ssim under
+  // appearance_halves).
+  double psnr_right_half = 0, ssim_right_half = 0;
+  ViewLook look;  // appearance_halves: the fitted embeddings (render the view in its look)
 };
 
 class Trainer {
@@ -200,26 +216,30 @@ class Trainer {
   std::mt19937_64& rng() { return rng_; }
   const std::mt19937_64& rng() const { return rng_; }
 
-  // Renders a view with the static Gaussians over `background` ([H, W, 3], clamped); with an
-  // `embedding` (appearance models only, [image_dim]) under that appearance, else in the plain
-  // colours.
-  FloatImage render(const Camera& camera, const std::array<float, 3>& background,
-                    std::span<const float> embedding = {}) const;
+  // Renders a view with the static Gaussians ([H, W, 3], clamped): in look.appearance's
+  // appearance when given (else the plain colours), over look.background's learned background
+  // when given (else over the colour `background`).
+  FloatImage render(const Camera& camera, const std::array<float, 3>& background, const ViewLook& look = {}) const;
   // Every layer of training view `train_view` at its full training resolution.
   ViewLayers render_layers(size_t train_view, const std::array<float, 3>& background) const;
   // What every render at this step uses: the configured threads and the active SH degree.
   RasterSettings raster_settings() const;
-  // PSNR/SSIM of every view's render over the evaluation background: the whole image for a
-  // model without appearance; with appearance the Photo Tourism protocol (fit_embedding on the
-  // left half, score the right half).
+  // PSNR/SSIM of every view's render: the whole image over the evaluation background for a
+  // model without per-image models; with appearance or background the Photo Tourism protocol
+  // (fit_look on the left half, score the right half).
   std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
-  // Test-time appearance: an embedding for `view` fitted by settings.test_steps Adam steps at
-  // settings.test_lr on the pixels where `fit` is 1 ([H·W], the view's own mask applies too),
-  // starting from the mean of the training embeddings; everything else frozen.
-  std::vector<float> fit_embedding(const TrainView& view, std::span<const float> fit) const;
+  // Test-time appearance: the embeddings of every per-image model this one has, for `view`,
+  // fitted together by appearance.test_steps Adam steps at appearance.test_lr on the pixels
+  // where `fit` is 1 ([H·W], the view's own mask applies too), starting from the mean of the
+  // training embeddings; everything else frozen.
+  ViewLook fit_look(const TrainView& view, std::span<const float> fit) const;
+  bool has_per_image_models() const { return config_.appearance.enabled || config_.background.enabled; }
   // Appearance model (appearance.hpp); empty (no views) when config.appearance is off.
   const AppearanceModel& appearance() const { return appearance_; }
   AppearanceModel& mutable_appearance() { return appearance_; }
+  // Background model (background.hpp); empty (no views) when config.background is off.
+  const BackgroundModel& background() const { return background_; }
+  BackgroundModel& mutable_background() { return background_; }
 
   // Where non-finite values are reported (once per incident); default: stderr.
   std::function<void(const std::string&)> warn;
@@ -246,6 +266,7 @@ class Trainer {
   TrainableGaussians gaussians_;
   std::vector<TrainableGaussians> distractors_;
   AppearanceModel appearance_;
+  BackgroundModel background_;
   std::vector<float> d_embeddings_;  // [views, image_dim] scratch: the step view's row is nonzero
   std::mt19937_64 rng_;
   int64_t step_ = 0;
@@ -255,6 +276,7 @@ class Trainer {
   std::vector<std::vector<std::vector<float>>> downscaled_keep_;
   // Scratch reused every step.
   LayerPass static_pass_, distractor_pass_;
+  BackgroundPass background_pass_;
   std::vector<float> composite_, d_composite_;
   std::vector<uint8_t> uncovered_mask_;  // this step's pixels neither layer explains
 

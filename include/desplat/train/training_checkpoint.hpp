@@ -19,6 +19,10 @@ std::vector<std::string> distractor_views_in_checkpoint(const Checkpoint& ckpt);
 std::vector<std::string> appearance_views_in_checkpoint(const Checkpoint& ckpt);
 // The appearance model (throws CheckpointError for a model trained without one).
 AppearanceModel appearance_from_checkpoint(const Checkpoint& ckpt);
+// The training views of the background model's embeddings, in order (empty: no background model).
+std::vector<std::string> background_views_in_checkpoint(const Checkpoint& ckpt);
+// The background model (throws CheckpointError for a model trained without one).
+BackgroundModel background_from_checkpoint(const Checkpoint& ckpt);
 // The distractors of buffer `index` (an index into distractor_views_in_checkpoint).
 GaussianSet distractors_from_checkpoint(const Checkpoint& ckpt, size_t index);
 

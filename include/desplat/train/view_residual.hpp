@@ -30,7 +30,7 @@ struct ViewResidual {
 // the user's mask; an ignored pixel is in no count (`pixels` counts the kept ones), gets no
 // penalty and is never uncovered.
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
-                                   std::span<const float> target, const std::array<float, 3>& background,
+                                   std::span<const float> target, const Background& background,
                                    float tolerance, float lambda_explained, std::span<float> d_distractor_alpha,
                                    std::vector<uint8_t>* uncovered_mask = nullptr, std::span<const float> keep = {});
 
