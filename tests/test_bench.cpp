@@ -18,10 +18,21 @@ namespace desplat {
 namespace {
 namespace fs = std::filesystem;
 
+// Every folder temp_dir made is removed when the test program ends, whatever the test did.
+struct TempDirs {
+  std::vector<fs::path> made;
+  ~TempDirs() {
+    std::error_code ignored;
+    for (const fs::path& p : made) fs::remove_all(p, ignored);
+  }
+};
+
 fs::path temp_dir(const std::string& name) {
+  static TempDirs dirs;
   const fs::path p = fs::temp_directory_path() / ("desplat_test_bench_" + std::to_string(::getpid()) + "_" + name);
   fs::remove_all(p);
   fs::create_directories(p);
+  dirs.made.push_back(p);
   return p;
 }
 

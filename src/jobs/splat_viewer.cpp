@@ -133,7 +133,7 @@ const char* kViewerScript = R"JS(
     gl.vertexAttribDivisor(loc, 1);
   }
   const sorted = new Float32Array(data.length);
-  const depth = new Float32Array(N), order = new Uint32Array(N), counts = new Uint32Array(65537);
+  const depth = new Float32Array(N), order = new Uint32Array(N), counts = new Uint32Array(65536);
 
   // Camera: rows of R are the camera's x (right), y (down), z (forward) in the world.
   let R = cfg.R.slice(), C = [0, 0, 0];
@@ -162,18 +162,22 @@ const char* kViewerScript = R"JS(
 
   function draw() {
     const T = [0, 1, 2].map((a) => -(R[3 * a] * C[0] + R[3 * a + 1] * C[1] + R[3 * a + 2] * C[2]));
-    // Back to front: a 16-bit counting sort on depth.
+    // Back to front: a 16-bit counting sort on depth. The range is taken from the stored
+    // (float32) depths, and every key is clamped to 0…65535: a key computed from a depth
+    // rounded below the double-precision minimum fell outside the buckets, which dropped the
+    // farthest Gaussian and drew a stale one in front of all others.
     let lo = Infinity, hi = -Infinity;
     for (let i = 0; i < N; i++) {
       const o = i * F;
-      const z = R[6] * data[o] + R[7] * data[o + 1] + R[8] * data[o + 2] + T[2];
-      depth[i] = z; if (z < lo) lo = z; if (z > hi) hi = z;
+      depth[i] = R[6] * data[o] + R[7] * data[o + 1] + R[8] * data[o + 2] + T[2];
+      const z = depth[i]; if (z < lo) lo = z; if (z > hi) hi = z;
     }
     const scale = hi > lo ? 65535 / (hi - lo) : 0;
+    const key = (i) => 65535 - Math.min(65535, Math.max(0, Math.floor((depth[i] - lo) * scale)));
     counts.fill(0);
-    for (let i = 0; i < N; i++) counts[65535 - Math.floor((depth[i] - lo) * scale)]++;
+    for (let i = 0; i < N; i++) counts[key(i)]++;
     for (let k = 1; k < 65536; k++) counts[k] += counts[k - 1];
-    for (let i = N - 1; i >= 0; i--) order[--counts[65535 - Math.floor((depth[i] - lo) * scale)]] = i;
+    for (let i = N - 1; i >= 0; i--) order[--counts[key(i)]] = i;
     for (let j = 0; j < N; j++) sorted.set(data.subarray(order[j] * F, order[j] * F + F), j * F);
     gl.bindBuffer(gl.ARRAY_BUFFER, inst); gl.bufferData(gl.ARRAY_BUFFER, sorted, gl.DYNAMIC_DRAW);
     gl.viewport(0, 0, canvas.width, canvas.height);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <optional>
 
+#include "desplat/core/statistics.hpp"
 #include "desplat/io/camera_models.hpp"
 #include "synth/random.hpp"
 
@@ -81,8 +82,7 @@ void add_sparse_points(const SparseInput& in, colmap::Model& model) {
     // Position noise in world units that reprojects to ≈ position_noise_px at the median depth.
     std::vector<double> depths;
     for (const Sighting& s : seen) depths.push_back(s.depth);
-    std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
-    const double sigma = in.spec.position_noise_px * depths[depths.size() / 2] / focal;
+    const double sigma = in.spec.position_noise_px * median(std::move(depths)) / focal;
     const Vec3 stored = surface + sigma * Vec3(rng.normal(), rng.normal(), rng.normal());
 
     colmap::Point3D point;

@@ -1,6 +1,8 @@
 // Total variation of the distractor alpha (docs/METHOD.md §4).
 #include "desplat/train/mask_coherence.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace desplat {

@@ -36,9 +36,9 @@ struct DistractorSettings {
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
   // Weight of the distractor mask's total variation (train/mask_coherence.hpp; ours): a
   // transient object is one connected area, also where it matches the scene behind it.
-  // Counted only with `regularize`. 0 (off) by default and in --preset paper; 0.1 measured
-  // best (docs/bench/issue17_ab.md, round 3, which says why it is not the default yet).
-  float lambda_mask_tv = 0.0f;
+  // Counted only with `regularize`. 0.1 measured best (docs/bench/issue17_ab.md, round 3);
+  // 0 (off) in --preset paper.
+  float lambda_mask_tv = 0.1f;
 
   // Growth control (docs/METHOD.md §7, growth control); each rule is off at 0 / false, as in
   // the authors' code (--preset paper). Defaults measured in docs/bench/issue17_ab.md.
