@@ -38,6 +38,18 @@ Outcome run(const std::string& command) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text};
 }
 
+// `single` equals the static column (the second of five) of a training figure row.
+void expect_static_column(const FloatImage& row, const FloatImage& single) {
+  ASSERT_EQ(row.width, 5 * single.width);
+  ASSERT_EQ(row.height, single.height);
+  for (int y = 0; y < single.height; ++y)
+    for (int x = 0; x < single.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(single.pixels[3 * (size_t(y) * single.width + x) + c],
+                  row.pixels[3 * (size_t(y) * row.width + single.width + x) + c])
+            << "pixel " << x << "," << y;
+}
+
 class TrainApp : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -303,13 +315,7 @@ TEST_F(TrainApp, BackgroundModelRendersOverAPhotosOwnBackground) {
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
   const FloatImage single = read_image_rgb(root_ / "sky_look" / "view_1.png");
   const FloatImage row = read_image_rgb(out / "renders" / "train" / "view_1.png");
-  ASSERT_EQ(row.width, 5 * single.width);
-  for (int y = 0; y < single.height; ++y)
-    for (int x = 0; x < single.width; ++x)
-      for (int c = 0; c < 3; ++c)
-        ASSERT_EQ(single.pixels[3 * (size_t(y) * single.width + x) + c],
-                  row.pixels[3 * (size_t(y) * row.width + single.width + x) + c])
-            << "pixel " << x << "," << y;
+  expect_static_column(row, single);
   // Negative control: over the evaluation colour it is another image.
   const Outcome plain = run(render + " --out " + (root_ / "sky_plain").string() + " --views view_1.png");
   ASSERT_EQ(plain.exit_code, 0) << plain.output;
@@ -336,13 +342,7 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
   const FloatImage single = read_image_rgb(root_ / "look" / "view_1.png");
   const FloatImage row = read_image_rgb(out / "renders" / "train" / "view_1.png");
-  ASSERT_EQ(row.width, 5 * single.width);
-  for (int y = 0; y < single.height; ++y)
-    for (int x = 0; x < single.width; ++x)
-      for (int c = 0; c < 3; ++c)
-        ASSERT_EQ(single.pixels[3 * (size_t(y) * single.width + x) + c],
-                  row.pixels[3 * (size_t(y) * row.width + single.width + x) + c])
-            << "pixel " << x << "," << y;
+  expect_static_column(row, single);
   // Negative control: the plain colours are another image.
   const Outcome plain_look = run(render + " --out " + (root_ / "plain").string() + " --views view_1.png");
   ASSERT_EQ(plain_look.exit_code, 0) << plain_look.output;

@@ -75,13 +75,7 @@ AppearanceModel::AppearanceModel(const AppearanceSettings& s, size_t views, uint
   embed_v.assign(image_embeddings.size(), 0.0f);
 }
 
-void AppearanceModel::check_consistent() const {
-  if (mlp.size() != mlp_floats() || mlp_m.size() != mlp.size() || mlp_v.size() != mlp.size())
-    throw std::logic_error("appearance MLP weights do not match its settings");
-  if (image_embeddings.size() % size_t(settings.image_dim) != 0 || embed_m.size() != image_embeddings.size() ||
-      embed_v.size() != image_embeddings.size())
-    throw std::logic_error("appearance image embeddings do not match image_dim");
-}
+void AppearanceModel::check_consistent() const { check_per_image_model(*this, "appearance"); }
 
 bool AppearanceModel::adam_update(std::span<const float> d_mlp, std::span<const float> d_embeddings) {
   if (d_mlp.size() != mlp.size() || d_embeddings.size() != image_embeddings.size())

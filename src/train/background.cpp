@@ -78,13 +78,7 @@ std::vector<float> BackgroundModel::mean_embedding() const {
   return e;
 }
 
-void BackgroundModel::check_consistent() const {
-  if (mlp.size() != mlp_floats() || mlp_m.size() != mlp.size() || mlp_v.size() != mlp.size())
-    throw std::logic_error("background MLP weights do not match its settings");
-  if (image_embeddings.size() % size_t(settings.image_dim) != 0 || embed_m.size() != image_embeddings.size() ||
-      embed_v.size() != image_embeddings.size())
-    throw std::logic_error("background image embeddings do not match image_dim");
-}
+void BackgroundModel::check_consistent() const { check_per_image_model(*this, "background"); }
 
 bool BackgroundModel::adam_update(std::span<const float> d_mlp, std::span<const float> d_embeddings) {
   if (d_mlp.size() != mlp.size() || d_embeddings.size() != image_embeddings.size())
@@ -236,34 +230,43 @@ double background_alpha_loss(std::span<const float> bg, std::span<const float> t
     explained[p] = (keep.empty() || keep[p] > 0) && err / 3.0f < settings.explained_error;
   }
   // The 3×3 box: a lone explained pixel in a textured region is chance, not background.
-  std::vector<uint32_t> clear, covered;
+  // Each kept pixel is clear or covered; ignored ones are in neither set.
+  enum : uint8_t { kIgnored = 0, kClear = 1, kCovered = 2 };
+  std::vector<uint8_t> cls(pixels, kIgnored);
+  size_t n_clear = 0, n_covered = 0;
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
-      const uint32_t p = uint32_t(size_t(y) * width + x);
-      if (!keep.empty() && keep[p] == 0) continue;  // ignored: in neither set, no gradient
+      const size_t p = size_t(y) * width + x;
+      if (!keep.empty() && keep[p] == 0) continue;  // ignored: no gradient
       int count = 0;
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
           const int xx = x + dx, yy = y + dy;
           if (xx >= 0 && yy >= 0 && xx < width && yy < height) count += explained[size_t(yy) * width + xx];
         }
-      (float(count) / 9.0f > settings.explained_share ? clear : covered).push_back(p);
+      const bool clear = float(count) / 9.0f > settings.explained_share;
+      cls[p] = clear ? kClear : kCovered;
+      ++(clear ? n_clear : n_covered);
     }
+  // Transparent where clear (λ_bg · mean A), opaque where covered (λ_o · mean (1 − A)).
+  const float w_clear = n_clear ? settings.lambda_alpha / float(n_clear) : 0.0f;
+  const float w_covered = n_covered ? settings.lambda_opaque / float(n_covered) : 0.0f;
+  double sum_clear = 0, sum_covered = 0;
+  for (size_t p = 0; p < pixels; ++p) {
+    if (cls[p] == kIgnored) continue;
+    const float ad = d.alpha.empty() ? 0.0f : d.alpha[p];
+    const float a = ad + (1.0f - ad) * s.alpha[p];
+    if (cls[p] == kClear) {
+      sum_clear += a;
+      d_static_alpha[p] += w_clear * (1.0f - ad);
+    } else {
+      sum_covered += 1.0f - a;
+      d_static_alpha[p] -= w_covered * (1.0f - ad);
+    }
+  }
   double value = 0;
-  auto pull = [&](const std::vector<uint32_t>& set, float lambda, float sign) {
-    if (set.empty() || lambda == 0) return;
-    const float weight = sign * lambda / float(set.size());
-    double sum = 0;
-    for (const uint32_t p : set) {
-      const float ad = d.alpha.empty() ? 0.0f : d.alpha[p];
-      const float a = ad + (1.0f - ad) * s.alpha[p];
-      sum += sign > 0 ? a : 1.0f - a;
-      d_static_alpha[p] += weight * (1.0f - ad);
-    }
-    value += double(lambda) * sum / double(set.size());
-  };
-  pull(clear, settings.lambda_alpha, +1.0f);
-  pull(covered, settings.lambda_opaque, -1.0f);
+  if (n_clear) value += double(settings.lambda_alpha) * sum_clear / double(n_clear);
+  if (n_covered) value += double(settings.lambda_opaque) * sum_covered / double(n_covered);
   return value;
 }
 
