@@ -294,7 +294,9 @@ TrainingData exposed_views(unsigned seed) {
     for (TrainView& v : *views) {
       const float gain = std::exp2(stops(rng));
       const float channel[3] = {gain * (1 + wb(rng)), gain * (1 + wb(rng)), gain * (1 + wb(rng))};
-      for (size_t p = 0; p < v.image.pixels.size(); ++p) v.image.pixels[p] *= channel[p % 3];
+      FloatImage photo = to_float(v.image);
+      for (size_t p = 0; p < photo.pixels.size(); ++p) photo.pixels[p] *= channel[p % 3];
+      v.image = to_bytes(photo);  // clipped at 1 and rounded, as a camera would
     }
   return data;
 }
@@ -400,8 +402,11 @@ TEST(Effects, AutoReadsEachViewsGainFromTheTracksAndTurnsAppearanceOnlyOnWhenThe
 
   TrainingData scaled = clean;
   const float stops[6] = {-0.6f, -0.3f, 0.0f, 0.2f, 0.4f, 0.7f};
-  for (size_t v = 0; v < scaled.train.size(); ++v)
-    for (float& p : scaled.train[v].image.pixels) p = std::min(1.0f, p * std::exp2(stops[v % 6]));
+  for (size_t v = 0; v < scaled.train.size(); ++v) {
+    FloatImage photo = to_float(scaled.train[v].image);
+    for (float& p : photo.pixels) p = std::min(1.0f, p * std::exp2(stops[v % 6]));
+    scaled.train[v].image = to_bytes(photo);
+  }
   const EffectsEvidence ev = examine_effects(scaled);
   EXPECT_TRUE(ev.appearance) << ev.reason;
   for (size_t v = 0; v < scaled.train.size(); ++v)
@@ -443,7 +448,7 @@ TEST(Effects, AutoTurnsTheBackgroundModelOnForASkyAndOnlyThen) {
   for (TrainView& v : painted.train)
     for (int y = 0; y < v.image.height / 2; ++y)
       for (int x = 0; x < v.image.width; ++x)
-        for (int c = 0; c < 3; ++c) v.image.pixels[3 * (size_t(y) * v.image.width + x) + c] = ((x / 6 + y / 6) % 2) ? 0.8f : 0.2f;
+        for (int c = 0; c < 3; ++c) v.image.pixels[3 * (size_t(y) * v.image.width + x) + c] = ((x / 6 + y / 6) % 2) ? 204 : 51;
   const EffectsEvidence textured = examine_effects(painted);
   EXPECT_FALSE(textured.background) << textured.background_reason;
   std::vector<std::string> why;

@@ -238,8 +238,10 @@ TEST(Background, AlphaLossOfAHandComputedCase) {
     if (p != 1 * w + 1) covered += 1 - (ad[p] + (1 - ad[p]) * as[p]);
   EXPECT_NEAR(background_alpha_loss(bg, target, {sc, as}, {dc, ad}, w, h, s, d_keep, keep), 0.01 * covered / 11, 1e-7);
   EXPECT_EQ(d_keep[1 * w + 1], 0.0f);
-  for (int p = 0; p < w * h; ++p)
-    if (p != 1 * w + 1) EXPECT_NEAR(d_keep[p], -0.01 * (1 - ad[p]) / 11, 1e-8) << p;
+  for (int p = 0; p < w * h; ++p) {
+    if (p == 1 * w + 1) continue;
+    EXPECT_NEAR(d_keep[p], -0.01 * (1 - ad[p]) / 11, 1e-8) << p;
+  }
 }
 
 // ∂C/∂bg through the composite = (1 − A_d)(1 − A_s), 0 where the clamp holds.
@@ -276,14 +278,16 @@ TrainingData sky_views(unsigned seed) {
       RasterOutput out;
       rasterize_forward(truth.view(), v.camera, RasterSettings{}, out);
       const float shift = haze(rng);
+      FloatImage photo{v.camera.width, v.camera.height, 3, std::vector<float>(3 * out.alpha.size())};
       for (int y = 0; y < v.camera.height; ++y)
         for (int x = 0; x < v.camera.width; ++x) {
           const std::array<float, 3> d = pixel_ray_direction(v.camera, x, y);
           const float up = std::clamp(-d[1] * 2.0f + 0.3f, 0.0f, 1.0f), side = 0.1f * d[0];
           const float sky[3] = {0.85f - 0.55f * up + side + shift, 0.88f - 0.4f * up + side + shift, 0.95f - 0.1f * up + shift};
           const size_t p = size_t(y) * v.camera.width + x;
-          for (int c = 0; c < 3; ++c) v.image.pixels[3 * p + c] = out.color[3 * p + c] + (1 - out.alpha[p]) * sky[c];
+          for (int c = 0; c < 3; ++c) photo.pixels[3 * p + c] = out.color[3 * p + c] + (1 - out.alpha[p]) * sky[c];
         }
+      v.image = to_bytes(photo);
     }
   return data;
 }

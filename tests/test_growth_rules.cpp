@@ -344,10 +344,10 @@ TEST(TrainerRules, StatisticsRulesReachTheTrainer) {
 // y 12–35 that the other views do not show.
 TrainingData views_with_a_one_view_square() {
   TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
-  FloatImage& img = data.train[0].image;
+  ByteImage& img = data.train[0].image;
   for (int y = 12; y < 36; ++y)
     for (int x = 20; x < 44; ++x)
-      for (int c = 0; c < 3; ++c) img.pixels[(size_t(y) * 64 + x) * 3 + c] = 1.0f;
+      for (int c = 0; c < 3; ++c) img.pixels[(size_t(y) * 64 + x) * 3 + c] = 255;
   return data;
 }
 

@@ -343,9 +343,9 @@ TEST(UserMasks, TrainingDataCarriesTheMaskAndZeroesIgnoredPixels) {
     EXPECT_EQ(v.keep[p], inside ? 0.0f : 1.0f) << p;
     if (inside) {
       ++ignored;
-      EXPECT_EQ(v.image.pixels[3 * p] + v.image.pixels[3 * p + 1] + v.image.pixels[3 * p + 2], 0.0f) << p;
+      EXPECT_EQ(v.image.pixels[3 * p] + v.image.pixels[3 * p + 1] + v.image.pixels[3 * p + 2], 0) << p;
     } else {
-      EXPECT_NEAR(v.image.pixels[3 * p], c.patterns[1].pixels[p], 1e-6f) << p;
+      EXPECT_NEAR(byte_to_float(v.image.pixels[3 * p]), c.patterns[1].pixels[p], 1e-6f) << p;
     }
   }
   EXPECT_EQ(ignored, 24);

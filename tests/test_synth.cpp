@@ -471,6 +471,12 @@ TEST(Synth, CheckedInDescriptionsLoadAndLayerOnTheirBase) {
               synth::apply_description(bench, {{"distractors", {{"clutter_ratio", pct / 100.0}}}}, "test"))
         << file;
   }
+  EXPECT_EQ(synth::load_description(kDescriptions / "bench_1080p_300.json"),
+            synth::apply_description(bench,
+                                     {{"camera", {{"width", 1920}, {"height", 1080}}},
+                                      {"views", {{"count", 300}}},
+                                      {"supersampling", 1}},
+                                     "test"));
 }
 
 TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {

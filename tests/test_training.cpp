@@ -107,7 +107,7 @@ TEST(Training, ImagesTooSmallForSsimAreRefusedUpFront) {
   TrainingData small_test = data;
   small_test.test.push_back(small_test.train.back());
   small_test.test.back().camera = downscale_camera(small_test.test.back().camera, 5);  // 12×9
-  small_test.test.back().image = downscale_image(small_test.test.back().image, 5);
+  small_test.test.back().image = downscale_bytes(small_test.test.back().image, 5);
   config.num_downscales = 0;
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(small_test, config); }),
                   "test view " + small_test.test.back().name + " is 12x9 px");
@@ -226,8 +226,8 @@ void mask_rectangle(TrainView& v, int x0, int y0, int w, int h) {
 void paint_red(TrainView& v, int x0, int y0, int w, int h) {
   for (int y = y0; y < y0 + h; ++y)
     for (int x = x0; x < x0 + w; ++x) {
-      float* p = &v.image.pixels[3 * (size_t(y) * v.camera.width + x)];
-      p[0] = 1.0f, p[1] = 0.0f, p[2] = 0.0f;
+      uint8_t* p = &v.image.pixels[3 * (size_t(y) * v.camera.width + x)];
+      p[0] = 255, p[1] = 0, p[2] = 0;
     }
 }
 

@@ -27,8 +27,9 @@ TrainView tiny_view(float bright) {
   v.camera.width = v.camera.height = 4;
   v.camera.fx = v.camera.fy = 4;
   v.camera.cx = v.camera.cy = 2;
-  v.image = {4, 4, 3, std::vector<float>(48, 0.5f)};
-  for (int c = 0; c < 3; ++c) v.image.pixels[3 * (2 * 4 + 2) + c] = bright;
+  FloatImage photo{4, 4, 3, std::vector<float>(48, 0.5f)};
+  for (int c = 0; c < 3; ++c) photo.pixels[3 * (2 * 4 + 2) + c] = bright;
+  v.image = to_bytes(photo);  // 0.5 becomes 128
   return v;
 }
 

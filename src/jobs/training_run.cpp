@@ -193,7 +193,9 @@ TrainingData load_training_data(const Scene& scene) {
 #pragma omp parallel for schedule(dynamic)
   for (size_t i = 0; i < scene.views.size(); ++i) {
     try {
-      views[i] = {scene.views[i].name, scene.views[i].camera, load_view_image(scene, i), {}};
+      // Held in 8 bits (a quarter of float's memory): exact for 8-bit photos and the loader's
+      // 8-bit cache; deeper files are rounded (docs/METHOD.md §1).
+      views[i] = {scene.views[i].name, scene.views[i].camera, to_bytes(load_view_image(scene, i)), {}};
       if (!scene.views[i].user_mask_path.empty()) {
         views[i].keep = load_view_keep_mask(scene, i);
         // What the mask hides is never read: zero it, so no rule can use it by accident.
@@ -473,13 +475,14 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                      [&](const ViewMetrics& m) { return m.name == v.name; });
     const FloatImage render =
         trainer.render(v.camera, config.eval_background, scored != final_metrics.end() ? scored->look : ViewLook{});
-    write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&v.image, &render}));
+    const FloatImage photo = to_float(v.image);
+    write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&photo, &render}));
   }
   // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
   if (config.distractors.enabled)
     for (size_t v = 0; v < data.train.size(); ++v)
       write_image(opt.out_dir / "renders" / "train" / fs::path(data.train[v].name).replace_extension(".png"),
-                  layers_figure_row(data.train[v].image, trainer.render_layers(v, config.eval_background)));
+                  layers_figure_row(to_float(data.train[v].image), trainer.render_layers(v, config.eval_background)));
   write_gaussian_ply(opt.out_dir / "point_cloud.ply", trainer.gaussians().params, data.normalization);
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);

@@ -92,14 +92,15 @@ float open_top_share(const TrainView& view, const std::vector<long long>& sample
   // Texture per cell: the mean |Laplacian| of the luminance's kBlock × kBlock means. The means
   // average sensor noise away; the Laplacian ignores a sky's smooth gradient.
   constexpr int kBlock = 4;
-  const std::vector<float>& img = view.image.pixels;
+  const std::vector<uint8_t>& img = view.image.pixels;
+  auto value = [&](size_t i) { return byte_to_float(img[i]); };
   const int bw = camera.width / kBlock, bh = camera.height / kBlock;
   std::vector<float> block(size_t(std::max(bw, 0)) * std::max(bh, 0), 0.0f);
   for (int y = 0; y < bh * kBlock; ++y)
     for (int x = 0; x < bw * kBlock; ++x) {
       const size_t p = 3 * (size_t(y) * camera.width + x);
       block[size_t(y / kBlock) * bw + x / kBlock] +=
-          (0.299f * img[p] + 0.587f * img[p + 1] + 0.114f * img[p + 2]) / float(kBlock * kBlock);
+          (0.299f * value(p) + 0.587f * value(p + 1) + 0.114f * value(p + 2)) / float(kBlock * kBlock);
     }
   std::vector<double> texture(size_t(cw) * ch, 0.0), count(size_t(cw) * ch, 0.0);
   for (int y = 1; y + 1 < bh; ++y)
@@ -165,7 +166,7 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
       ++samples[size_t(v)];
       sample_pixels[size_t(v)].push_back(pixel);
       for (int c = 0; c < 3; ++c) {
-        const float point = data.colors[i][c] / 255.0f, photo = view.image.pixels[3 * size_t(pixel) + c];
+        const float point = data.colors[i][c] / 255.0f, photo = byte_to_float(view.image.pixels[3 * size_t(pixel) + c]);
         if (point > kDarkest && point < 0.95f && photo > 0.02f && photo < 0.98f)
           ratios[size_t(v)][c].push_back(std::log2(double(photo) / point));
       }

@@ -56,23 +56,6 @@ Camera downscale_camera(const Camera& c, int factor) {
   return out;
 }
 
-FloatImage downscale_image(const FloatImage& img, int factor) {
-  const int channels = img.channels;
-  FloatImage out{std::max(1, img.width / factor), std::max(1, img.height / factor), channels, {}};
-  out.pixels.assign(size_t(out.width) * out.height * channels, 0.0f);
-  const float inv = 1.0f / float(factor * factor);
-  for (int y = 0; y < out.height; ++y)
-    for (int x = 0; x < out.width; ++x)
-      for (int c = 0; c < channels; ++c) {
-        float s = 0;
-        for (int dy = 0; dy < factor; ++dy)
-          for (int dx = 0; dx < factor; ++dx)
-            s += img.pixels[(size_t(y * factor + dy) * img.width + (x * factor + dx)) * channels + c];
-        out.pixels[(size_t(y) * out.width + x) * channels + c] = s * inv;
-      }
-  return out;
-}
-
 Trainer::Trainer(const TrainingData& data, TrainConfig config)
     : data_(data), config_(std::move(config)), rng_(config_.seed) {
   // Adam, the loss and the initialization are plain `omp parallel` loops: without this a
@@ -166,13 +149,18 @@ int Trainer::next_view() {
 }
 
 const FloatImage& Trainer::target_at(int view, int factor) {
-  if (factor == 1) return data_.train[view].image;
-  int level = 0;
-  while ((2 << level) < factor) ++level;
-  auto& cache = downscaled_[view];
-  while (static_cast<int>(cache.size()) <= level)
-    cache.push_back(downscale_image(data_.train[view].image, 2 << cache.size()));
-  return cache[level];
+  const ByteImage* photo = &data_.train[view].image;
+  if (factor > 1) {
+    int level = 0;
+    while ((2 << level) < factor) ++level;
+    auto& cache = downscaled_[view];
+    while (static_cast<int>(cache.size()) <= level) cache.push_back(downscale_bytes(*photo, 2 << cache.size()));
+    photo = &cache[level];
+  }
+  target_.width = photo->width, target_.height = photo->height, target_.channels = photo->channels;
+  target_.pixels.resize(photo->pixels.size());
+  to_float(*photo, target_.pixels);
+  return target_;
 }
 
 std::span<const float> Trainer::keep_at(int view, int factor) {
@@ -184,11 +172,13 @@ std::span<const float> Trainer::keep_at(int view, int factor) {
   auto& cache = downscaled_keep_[view];
   const Camera& cam = data_.train[view].camera;
   while (static_cast<int>(cache.size()) <= level) {
-    // The mean of the covered pixels is exactly 1 only when every one of them is kept: a pixel
-    // that mixes in an ignored one (whose photo value is meaningless) is ignored too.
-    const FloatImage mean = downscale_image(FloatImage{cam.width, cam.height, 1, full}, 2 << cache.size());
-    std::vector<float> keep(mean.pixels.size());
-    for (size_t i = 0; i < keep.size(); ++i) keep[i] = mean.pixels[i] >= 1.0f - 1e-6f ? 1.0f : 0.0f;
+    // A coarse pixel is kept only when every pixel it covers is: one that mixes in an ignored
+    // pixel (whose photo value is meaningless) is ignored too.
+    const int f = 2 << cache.size(), w = std::max(1, cam.width / f), h = std::max(1, cam.height / f);
+    std::vector<float> keep(size_t(w) * h, 1.0f);
+    for (int y = 0; y < h * f && y < cam.height; ++y)
+      for (int x = 0; x < w * f && x < cam.width; ++x)
+        if (full[size_t(y) * cam.width + x] == 0) keep[size_t(y / f) * w + x / f] = 0;
     cache.push_back(std::move(keep));
   }
   return cache[level];
@@ -216,6 +206,9 @@ StepStats Trainer::step() {
   stats.step = step_;
   const int view = next_view();
   const int factor = config_.downscale_at(step_);
+  if (factor == 1)  // the schedule never goes back to a coarser level: give the pyramid's memory back
+    for (std::vector<ByteImage>& levels : downscaled_)
+      if (!levels.empty()) std::vector<ByteImage>().swap(levels);
   const Camera cam = downscale_camera(data_.train[view].camera, factor);
   const FloatImage& target = target_at(view, factor);
   const std::span<const float> keep = keep_at(view, factor);
@@ -404,7 +397,7 @@ void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) 
       m = 1;
     }
     if (count == 0) continue;
-    const GaussianSet seeds = reseed_distractors(c, mask, view.image.pixels, count, config_.distractors, rng_());
+    const GaussianSet seeds = reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
     distractors_[v].append(seeds);
     transient_seeded += int64_t(seeds.size());
   }
@@ -492,6 +485,7 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
   std::vector<float> keep(fit.begin(), fit.end());
   if (!view.keep.empty())
     for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
+  const FloatImage photo = to_float(view.image);
   const bool recolor = config_.appearance.enabled, sky = config_.background.enabled;
   // Start from the mean training look.
   ViewLook look;
@@ -516,7 +510,7 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     if (sky) sky_pass.forward(background_, look.background, cam, bg_degree, config_.threads);
     const Background bg = sky ? sky_pass.background() : Background(config_.eval_background);
     composite_layers(pass.layer(), Layer{}, bg, composite);
-    photometric_loss(composite, view.image.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite, keep);
+    photometric_loss(composite, photo.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite, keep);
     pass.d_color.resize(3 * pixels);
     pass.d_alpha.resize(pixels);
     sky_pass.d_image.resize(sky ? 3 * pixels : 0);
@@ -574,13 +568,14 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
     m.name = v.name;
     if (has_per_image_models()) m.protocol = EvalProtocol::appearance_halves, m.look = fit_look(v, left);
     const FloatImage img = render(v.camera, config_.eval_background, m.look);
-    m.psnr_right_half = psnr(img.pixels, v.image.pixels, right);
-    m.ssim_right_half = ssim(img.pixels, v.image.pixels, w, h, right);
+    const FloatImage photo = to_float(v.image);
+    m.psnr_right_half = psnr(img.pixels, photo.pixels, right);
+    m.ssim_right_half = ssim(img.pixels, photo.pixels, w, h, right);
     if (m.protocol == EvalProtocol::appearance_halves) {
       m.psnr = m.psnr_right_half, m.ssim = m.ssim_right_half;
     } else {
-      m.psnr = psnr(img.pixels, v.image.pixels, v.keep);
-      m.ssim = ssim(img.pixels, v.image.pixels, w, h, v.keep);
+      m.psnr = psnr(img.pixels, photo.pixels, v.keep);
+      m.ssim = ssim(img.pixels, photo.pixels, w, h, v.keep);
     }
     out.push_back(std::move(m));
   }

@@ -33,7 +33,7 @@ float color_difference(const TrainView& view, const std::array<float, 3>& x, con
   if (pixel < 0) return -1.0f;
   if (!view.keep.empty() && view.keep[size_t(pixel)] == 0) return -1.0f;  // ignored by the user: no evidence
   float diff = 0;
-  for (int k = 0; k < 3; ++k) diff += std::abs(view.image.pixels[3 * size_t(pixel) + k] - rgb[k] / 255.0f);
+  for (int k = 0; k < 3; ++k) diff += std::abs(byte_to_float(view.image.pixels[3 * size_t(pixel) + k]) - rgb[k] / 255.0f);
   return diff / 3.0f;
 }
 

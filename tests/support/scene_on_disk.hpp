@@ -19,7 +19,7 @@ inline void write_scene_folder(const std::filesystem::path& dir, const TrainingD
   uint32_t id = 1;
   for (const auto* list : {&data.train, &data.test})
     for (const TrainView& v : *list) {
-      write_image(dir / "images" / (v.name + ".png"), v.image);
+      write_image(dir / "images" / (v.name + ".png"), to_float(v.image));
       Eigen::Matrix3d R;
       for (int r = 0; r < 3; ++r)
         for (int k = 0; k < 3; ++k) R(r, k) = v.camera.R_cw[3 * r + k];

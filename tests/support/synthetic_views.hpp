@@ -61,9 +61,10 @@ inline TrainingData synthetic_training_data(int views, int width, int height, un
     view.camera = look_at_camera(6.2831853f * v / views, 1.0f, width, height);
     RasterOutput out;
     rasterize_forward(truth.view(), view.camera, RasterSettings{}, out);
-    view.image = {width, height, 3, std::vector<float>(out.color.size())};
+    FloatImage photo{width, height, 3, std::vector<float>(out.color.size())};
     for (size_t p = 0; p < out.alpha.size(); ++p)
-      for (int c = 0; c < 3; ++c) view.image.pixels[3 * p + c] = out.color[3 * p + c] + (1 - out.alpha[p]) * bg[c];
+      for (int c = 0; c < 3; ++c) photo.pixels[3 * p + c] = out.color[3 * p + c] + (1 - out.alpha[p]) * bg[c];
+    view.image = to_bytes(photo);  // an 8-bit photo, as training holds one
     (v % 4 == 0 ? data.test : data.train).push_back(std::move(view));
   }
   // SfM-like points: the ground-truth centers, jittered, with their colors.

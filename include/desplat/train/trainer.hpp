@@ -33,7 +33,7 @@ namespace desplat {
 struct TrainView {
   std::string name;
   Camera camera;      // undistorted pinhole, normalized frame, full training resolution
-  FloatImage image;   // [H, W, 3] matching the camera
+  ByteImage image;    // [H, W, 3] matching the camera, 8 bits per channel (core/image.hpp)
   // Optional [H·W], the user's mask (docs/METHOD.md §4, masks): 1 = use the pixel, 0 = ignore
   // it; empty = use every pixel. An ignored pixel leaves the loss, SSIM, the regularizers, the
   // residual statistics, the densification statistics and the metrics; its image value is
@@ -270,8 +270,10 @@ class Trainer {
   std::vector<float> d_embeddings_;  // [views, image_dim] scratch: the step view's row is nonzero
   std::mt19937_64 rng_;
   int64_t step_ = 0;
-  // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)).
-  std::vector<std::vector<FloatImage>> downscaled_;
+  // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)), built when the
+  // resolution schedule first needs them and freed once it has reached full resolution.
+  std::vector<std::vector<ByteImage>> downscaled_;
+  FloatImage target_;  // this step's photo in float, at the step's resolution
   // Per view with a mask: the mask at factor 2, 4, … (a pixel is kept when all it covers is).
   std::vector<std::vector<std::vector<float>>> downscaled_keep_;
   // Scratch reused every step.
@@ -281,6 +283,7 @@ class Trainer {
   std::vector<uint8_t> uncovered_mask_;  // this step's pixels neither layer explains
 
   int next_view();
+  // The view's photo at 1/factor resolution, converted into target_ (valid until the next call).
   const FloatImage& target_at(int view, int factor);
   std::span<const float> keep_at(int view, int factor);  // empty when the view has no mask
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
@@ -303,8 +306,7 @@ class Trainer {
 // resolution, not a transient object (docs/METHOD.md §7, growth control).
 bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period);
 
-// Camera and image at 1/factor resolution (block average of every channel, sizes rounded down).
+// The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
-FloatImage downscale_image(const FloatImage& img, int factor);
 
 }  // namespace desplat
