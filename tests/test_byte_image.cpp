@@ -9,6 +9,10 @@
 
 #include "desplat/core/image.hpp"
 #include "desplat/io/image_io.hpp"
+#include "desplat/jobs/training_run.hpp"
+#include "support/expect.hpp"
+#include "support/scene_on_disk.hpp"
+#include "support/synthetic_views.hpp"
 #include "support/temp_dir.hpp"
 
 namespace desplat {
@@ -89,6 +93,42 @@ TEST(ByteImage, ConvertingIntoAWronglySizedBufferIsAnError) {
   const ByteImage img{2, 2, 3, std::vector<uint8_t>(12, 7)};
   std::vector<float> small(11);
   EXPECT_THROW(to_float(img, small), std::invalid_argument);
+}
+
+// A capture with one 16-bit photo: training holds it in 8 bits and says so once, naming it;
+// the same capture in 8 bits loads without a word, and both hold the same bytes.
+TEST(ByteImage, LoadingADeeperPhotoWarnsThatItIsRounded) {
+  testing::TempDir dir("byte_image_scene"), cache("byte_image_cache");
+  const TrainingData data = test::synthetic_training_data(8, 64, 48, 2);
+  test::write_scene_folder(dir.path(), data);
+  auto load = [&](std::vector<std::string>& warnings) {
+    SceneOptions o;
+    o.cache_dir = cache.path();
+    o.on_warning = [&](const std::string& w) { warnings.push_back(w); };
+    return load_training_data(load_colmap_scene(dir.path(), o));
+  };
+  std::vector<std::string> plain;
+  const TrainingData eight = load(plain);
+  EXPECT_TRUE(plain.empty()) << plain.front();
+
+  // view_1 again, as 16 bits per channel: each byte b becomes 257·b + 1 (not a whole byte).
+  const ByteImage& photo = data.train.at(0).image;
+  ASSERT_EQ(data.train[0].name, "view_1");
+  std::vector<uint16_t> deep(photo.pixels.size());
+  for (size_t i = 0; i < deep.size(); ++i) deep[i] = uint16_t(257 * photo.pixels[i] + (photo.pixels[i] < 255 ? 1 : -1));
+  const auto path = dir.path() / "images" / "view_1.png";
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(path.string(), OIIO::ImageSpec(photo.width, photo.height, 3, OIIO::TypeDesc::UINT16)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, deep.data()));
+  out->close();
+  std::vector<std::string> warnings;
+  const TrainingData sixteen = load(warnings);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_CONTAINS(warnings[0], "1 of 8 photos (first: view_1.png) hold more than 8 bits per channel");
+  EXPECT_CONTAINS(warnings[0], "rounds them to 8 bits");
+  ASSERT_EQ(sixteen.train.size(), eight.train.size());
+  for (size_t v = 0; v < eight.train.size(); ++v) EXPECT_EQ(sixteen.train[v].image.pixels, eight.train[v].image.pixels) << v;
 }
 
 }  // namespace

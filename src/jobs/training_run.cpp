@@ -189,13 +189,17 @@ TrainingData load_training_data(const Scene& scene) {
   data.colors = scene.points_rgb;
   data.normalization = scene.normalization;
   std::vector<TrainView> views(scene.views.size());
+  std::vector<uint8_t> rounded(scene.views.size(), 0);  // the photo had values 8 bits do not hold
   std::string error;
 #pragma omp parallel for schedule(dynamic)
   for (size_t i = 0; i < scene.views.size(); ++i) {
     try {
       // Held in 8 bits (a quarter of float's memory): exact for 8-bit photos and the loader's
-      // 8-bit cache; deeper files are rounded (docs/METHOD.md §1).
-      views[i] = {scene.views[i].name, scene.views[i].camera, to_bytes(load_view_image(scene, i)), {}};
+      // 8-bit cache; deeper files are rounded, and said so below (docs/METHOD.md §7).
+      const FloatImage photo = load_view_image(scene, i);
+      views[i] = {scene.views[i].name, scene.views[i].camera, to_bytes(photo), {}};
+      for (size_t k = 0; k < photo.pixels.size() && !rounded[i]; ++k)
+        rounded[i] = byte_to_float(views[i].image.pixels[k]) != photo.pixels[k];
       if (!scene.views[i].user_mask_path.empty()) {
         views[i].keep = load_view_keep_mask(scene, i);
         // What the mask hides is never read: zero it, so no rule can use it by accident.
@@ -208,6 +212,14 @@ TrainingData load_training_data(const Scene& scene) {
     }
   }
   if (!error.empty()) throw SceneError(error);
+  if (const auto n = std::count(rounded.begin(), rounded.end(), 1); n > 0) {
+    const std::string first = scene.views[size_t(std::find(rounded.begin(), rounded.end(), 1) - rounded.begin())].name;
+    const std::string message = std::to_string(n) + " of " + std::to_string(rounded.size()) + " photos (first: " + first +
+                                ") hold more than 8 bits per channel or values outside [0, 1]; training rounds them "
+                                "to 8 bits, clamped to [0, 1]";
+    if (scene.on_warning) scene.on_warning(message);
+    else std::fprintf(stderr, "desplat: warning: %s\n", message.c_str());
+  }
   std::vector<int32_t> train_index(views.size(), -1);  // scene view → index into data.train
   for (size_t i = 0; i < views.size(); ++i) {
     if (!scene.views[i].is_test) train_index[i] = int32_t(data.train.size());
