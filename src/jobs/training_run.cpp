@@ -195,7 +195,7 @@ TrainingData load_training_data(const Scene& scene) {
   for (size_t i = 0; i < scene.views.size(); ++i) {
     try {
       // Held in 8 bits (a quarter of float's memory): exact for 8-bit photos and the loader's
-      // 8-bit cache; deeper files are rounded, and said so below (docs/METHOD.md §7).
+      // 8-bit cache; deeper files are rounded, and said so below (docs/METHOD.md §6).
       const FloatImage photo = load_view_image(scene, i);
       views[i] = {scene.views[i].name, scene.views[i].camera, to_bytes(photo), {}};
       for (size_t k = 0; k < photo.pixels.size() && !rounded[i]; ++k)
