@@ -29,8 +29,8 @@ int main(int argc, char** argv) {
   app.add_option("--config", o.config_file, "JSON file overriding training settings (see config.json of any run)")
       ->check(CLI::ExistingFile);
   app.add_option("--preset", o.preset,
-                 "starting settings: default (what measures best) or paper (the authors' exact behaviour); "
-                 "--config applies on top")
+                 "starting settings: fast (a 3,000-step preview), default (what measures best, 30,000 steps) "
+                 "or paper (the authors' exact behaviour); --config and --iterations apply on top")
       ->check(CLI::IsMember(desplat::preset_names()));
   app.add_option("--iterations", o.iterations, "training steps (default 30000)")
       ->check(desplat::apps::integer_in(1, INT64_MAX));

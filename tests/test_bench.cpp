@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "desplat/jobs/bench_run.hpp"
+#include "desplat/train/presets.hpp"
 #include "desplat/jobs/clutter_summary.hpp"
 #include "desplat/jobs/report.hpp"
 #include "support/expect.hpp"
@@ -206,6 +207,32 @@ TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
   EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x"}], "score_at": "half"})").find("score_at"),
             std::string::npos);
   EXPECT_NE(error_of("{").find((dir / "g.json").string()), std::string::npos);
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "preset": "quick"}]})").find("run 'x': unknown preset 'quick'"),
+            std::string::npos);
+  fs::remove_all(dir);
+}
+
+// A run's preset is its starting configuration, as in desplat_train --preset; the grid's
+// steps apply only to runs without one, and a run's config overrides both.
+TEST(BenchGrid, RunsStartFromTheirPresetAndKeepItsLength) {
+  const fs::path dir = temp_dir("grid_presets");
+  std::ofstream(dir / "g.json") << R"({"scenes": ["a"], "steps": 50, "threads": 1, "runs": [
+    {"name": "plain"}, {"name": "fast", "preset": "fast"}, {"name": "paper", "preset": "paper"},
+    {"name": "fast 10 steps", "preset": "fast", "config": {"iterations": 10, "densify": {"warmup": 7}}}]})";
+  const BenchGrid g = read_bench_grid(dir / "g.json");
+  ASSERT_EQ(g.runs.size(), 4u);
+  const TrainConfig plain = bench_run_config(g, g.runs[0]), fast = bench_run_config(g, g.runs[1]),
+                    paper = bench_run_config(g, g.runs[2]), short_fast = bench_run_config(g, g.runs[3]);
+  EXPECT_EQ(plain.iterations, 50);
+  EXPECT_EQ(fast.iterations, preset_config("fast").iterations);
+  EXPECT_EQ(fast.resolution_schedule, preset_config("fast").resolution_schedule);
+  EXPECT_EQ(paper.iterations, preset_config("paper").iterations);
+  EXPECT_TRUE(paper.densify.stats.visible_count_from_one);
+  EXPECT_FALSE(plain.densify.stats.visible_count_from_one);
+  EXPECT_EQ(short_fast.iterations, 10);
+  EXPECT_EQ(short_fast.densify.warmup, 7);
+  EXPECT_EQ(short_fast.resolution_schedule, preset_config("fast").resolution_schedule);
+  for (const TrainConfig* c : {&plain, &fast, &paper, &short_fast}) EXPECT_EQ(c->threads, 1);
   fs::remove_all(dir);
 }
 
@@ -217,7 +244,8 @@ TEST(BenchGrid, CheckedInGridsAreValid) {
     EXPECT_FALSE(g.runs.empty()) << entry.path();
     ++grids;
   }
-  EXPECT_EQ(grids, 5);  // bench_grid, bench_grid_quick, bench_grid_7k_half, clutter_grid, clutter_tracks_grid
+  EXPECT_EQ(grids, 7);  // bench_grid, bench_grid_quick, bench_grid_7k_half, clutter_grid, clutter_tracks_grid,
+                        // presets_fox_grid, presets_synth_grid
 }
 
 TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {

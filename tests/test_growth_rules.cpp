@@ -8,6 +8,7 @@
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
 #include "desplat/train/presets.hpp"
+#include "desplat/train/train_config_json.hpp"
 #include "desplat/train/view_residual.hpp"
 #include "desplat/train/trainer.hpp"
 #include "support/expect.hpp"
@@ -485,7 +486,49 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
   EXPECT_EQ(def.appearance.hidden_width, 32);  // docs/bench/issue15_effects.md
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
-                  "unknown preset 'fastest' (known: default, paper)");
+                  "unknown preset 'fastest' (known: fast, default, paper)");
+}
+
+// The fast preset is the default's schedule fitted into its own length: every phase the
+// default goes through must also happen, in order, before the fast run ends.
+TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
+  const TrainConfig fast = preset_config("fast");
+  EXPECT_NO_THROW(validate_config(fast));
+  ASSERT_EQ(fast.iterations, 3000);
+  // A third of the run at 1/4, 1/2 and full resolution.
+  EXPECT_EQ(fast.downscale_at(0), 4);
+  EXPECT_EQ(fast.downscale_at(999), 4);
+  EXPECT_EQ(fast.downscale_at(1000), 2);
+  EXPECT_EQ(fast.downscale_at(2000), 1);
+  EXPECT_EQ(fast.full_resolution_from(), 2000);
+  // Full SH degree before full resolution.
+  EXPECT_EQ(fast.sh_degree_at(fast.full_resolution_from() - 1), fast.sh_degree);
+  // Densification starts, stops with steps left to settle, and resets opacity inside the run.
+  EXPECT_LT(fast.densify.warmup, fast.full_resolution_from());
+  EXPECT_LT(fast.densify.stop_split_at, fast.iterations);
+  const int64_t reset_every = int64_t(fast.densify.reset_alpha_every) * fast.densify.refine_every;
+  EXPECT_LT(reset_every, fast.densify.stop_split_at);
+  // Positions decay over this run's length.
+  EXPECT_EQ(fast.means_lr_decay_steps, fast.iterations);
+  // Every view's distractor buffer is refined at least 10 times while densifying with ~50 views.
+  int refinements = 0;
+  for (int64_t step = 0; step < fast.densify.stop_split_at; ++step)
+    refinements += distractor_refine_due(step, 50, fast.densify, fast.distractors) ? 1 : 0;
+  EXPECT_GE(refinements, 10);
+  // Everything else is the default's.
+  TrainConfig same = fast;
+  const TrainConfig def;
+  same.iterations = def.iterations;
+  same.resolution_schedule = def.resolution_schedule;
+  same.sh_degree_interval = def.sh_degree_interval;
+  same.background.sh_degree_interval = def.background.sh_degree_interval;
+  same.means_lr_decay_steps = def.means_lr_decay_steps;
+  same.densify.warmup = def.densify.warmup;
+  same.densify.stop_split_at = def.densify.stop_split_at;
+  same.densify.stop_screen_size_at = def.densify.stop_screen_size_at;
+  same.densify.reset_alpha_every = def.densify.reset_alpha_every;
+  same.distractors.refine_every_epochs = def.distractors.refine_every_epochs;
+  EXPECT_EQ(config_to_json(same).dump(), config_to_json(def).dump());
 }
 
 }  // namespace

@@ -19,6 +19,12 @@
 #include "desplat/io/masks.hpp"
 
 namespace desplat {
+
+void report_warning(const WarningSink& sink, const std::string& message) {
+  if (sink) sink(message);
+  else std::cerr << "desplat: warning: " << message << "\n";
+}
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -226,8 +232,7 @@ void write_atomically(const fs::path& path, const FloatImage& image) {
 
 void warn(const WarningSink& sink, std::vector<std::string>* log, const std::string& message) {
   if (log) log->push_back(message);
-  if (sink) sink(message);
-  else std::cerr << "desplat: warning: " << message << "\n";
+  report_warning(sink, message);
 }
 
 FloatImage read_checked(const fs::path& path, int width, int height) {

@@ -17,6 +17,7 @@
 #include "desplat/eval/plot.hpp"
 #include "desplat/jobs/clutter_summary.hpp"
 #include "desplat/eval/mask_metrics.hpp"
+#include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/jobs/training_run.hpp"
 
@@ -28,13 +29,6 @@ namespace {
 
 constexpr const char* kCsvHeader =
     "scene,clutter_ratio,run,desplat,step,train_seconds,psnr,ssim,mask_iou,static_gaussians,distractor_gaussians";
-
-TrainConfig run_config(const BenchGrid& grid, const BenchRun& run) {
-  TrainConfig c = config_from_json(run.config);
-  if (!run.config.contains("iterations")) c.iterations = grid.steps;
-  c.threads = grid.threads;
-  return c;
-}
 
 // The clutter ratio desplat_synth recorded in <scene>/scene.json; -1 when there is none.
 double scene_clutter_ratio(const fs::path& scene) {
@@ -66,6 +60,14 @@ double mean(const std::vector<ViewMetrics>& m, double ViewMetrics::*field) {
 }
 
 }  // namespace
+
+TrainConfig bench_run_config(const BenchGrid& grid, const BenchRun& run) {
+  TrainConfig c = config_from_json(run.config, preset_config(run.preset.empty() ? "default" : run.preset));
+  // A preset's own length stands (fast is 3,000 steps); otherwise the grid's.
+  if (!run.config.contains("iterations") && run.preset.empty()) c.iterations = grid.steps;
+  c.threads = grid.threads;
+  return c;
+}
 
 BenchGrid read_bench_grid(const fs::path& file) {
   std::ifstream f(file);
@@ -100,6 +102,7 @@ BenchGrid read_bench_grid(const fs::path& file) {
             if (rk == "name") run.name = rv.get<std::string>();
             else if (rk == "config") run.config = rv;
             else if (rk == "downscale") run.downscale = rv.get<int>();
+            else if (rk == "preset") run.preset = rv.get<std::string>();
             else fail("unknown run setting '" + rk + "'");
           }
           g.runs.push_back(run);
@@ -121,7 +124,7 @@ BenchGrid read_bench_grid(const fs::path& file) {
     if (!names.insert(r.name).second) fail("two runs named '" + r.name + "'");
     if (r.downscale < 1) fail("run '" + r.name + "': downscale must be ≥ 1");
     try {
-      run_config(g, r);
+      bench_run_config(g, r);
     } catch (const std::invalid_argument& e) {
       fail("run '" + r.name + "': " + e.what());
     }
@@ -178,7 +181,7 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
     const double clutter = scene_clutter_ratio(scene_dir);
     std::unique_ptr<TrainingData> full;  // full-resolution test views, loaded when first needed
     for (const BenchRun& run : grid.runs) {
-      const TrainConfig config = run_config(grid, run);
+      const TrainConfig config = bench_run_config(grid, run);
       if (finished(points, name, run.name, config.iterations)) continue;
       // An unfinished run starts over: drop its partial points.
       std::erase_if(points, [&](const BenchPoint& p) { return p.scene == name && p.run == run.name; });

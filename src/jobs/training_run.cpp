@@ -217,8 +217,7 @@ TrainingData load_training_data(const Scene& scene) {
     const std::string message = std::to_string(n) + " of " + std::to_string(rounded.size()) + " photos (first: " + first +
                                 ") hold more than 8 bits per channel or values outside [0, 1]; training rounds them "
                                 "to 8 bits, clamped to [0, 1]";
-    if (scene.on_warning) scene.on_warning(message);
-    else std::fprintf(stderr, "desplat: warning: %s\n", message.c_str());
+    report_warning(scene.on_warning, message);
   }
   std::vector<int32_t> train_index(views.size(), -1);  // scene view → index into data.train
   for (size_t i = 0; i < views.size(); ++i) {

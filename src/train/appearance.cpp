@@ -80,12 +80,11 @@ void AppearanceModel::check_consistent() const { check_per_image_model(*this, "a
 bool AppearanceModel::adam_update(std::span<const float> d_mlp, std::span<const float> d_embeddings) {
   if (d_mlp.size() != mlp.size() || d_embeddings.size() != image_embeddings.size())
     throw std::logic_error("appearance adam_update: gradient sizes differ from the parameters");
-  auto finite = [](std::span<const float> g) { return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); }); };
-  if (!finite(d_mlp) || !finite(d_embeddings)) return false;
-  ++adam_step;
+  if (!all_finite(d_mlp) || !all_finite(d_embeddings)) return false;
   const AdamSettings a;
-  const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
-  const float sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(a.beta2), double(adam_step))));
+  const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
+  const double bc1 = bc.bc1;
+  const float sqrt_bc2 = bc.sqrt_bc2;
   adam_span(mlp.data(), mlp_m.data(), mlp_v.data(), d_mlp.data(), mlp.size(), float(settings.lr_mlp / bc1), sqrt_bc2, a);
   adam_span(image_embeddings.data(), embed_m.data(), embed_v.data(), d_embeddings.data(), image_embeddings.size(),
             float(settings.lr_image / bc1), sqrt_bc2, a);

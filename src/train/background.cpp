@@ -83,12 +83,11 @@ void BackgroundModel::check_consistent() const { check_per_image_model(*this, "b
 bool BackgroundModel::adam_update(std::span<const float> d_mlp, std::span<const float> d_embeddings) {
   if (d_mlp.size() != mlp.size() || d_embeddings.size() != image_embeddings.size())
     throw std::logic_error("background adam_update: gradient sizes differ from the parameters");
-  auto finite = [](std::span<const float> g) { return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); }); };
-  if (!finite(d_mlp) || !finite(d_embeddings)) return false;
-  ++adam_step;
+  if (!all_finite(d_mlp) || !all_finite(d_embeddings)) return false;
   const AdamSettings a;
-  const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
-  const float sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(a.beta2), double(adam_step))));
+  const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
+  const double bc1 = bc.bc1;
+  const float sqrt_bc2 = bc.sqrt_bc2;
   auto step = [&](size_t begin, size_t end, float lr) {
     adam_span(mlp.data() + begin, mlp_m.data() + begin, mlp_v.data() + begin, d_mlp.data() + begin, end - begin,
               float(lr / bc1), sqrt_bc2, a);

@@ -5,11 +5,25 @@
 
 namespace desplat {
 
-std::vector<std::string> preset_names() { return {"default", "paper"}; }
+std::vector<std::string> preset_names() { return {"fast", "default", "paper"}; }
 
 TrainConfig preset_config(std::string_view name) {
   TrainConfig c;
   if (name == "default") return c;
+  if (name == "fast") {
+    // A 3,000-step preview (docs/METHOD.md §7, presets; measured in docs/bench/issue16_speed.md).
+    c.iterations = 3000;
+    c.resolution_schedule = 1000;  // a third of the run at each of 1/4, 1/2 and full resolution
+    c.sh_degree_interval = 300;    // degree 3 by step 900, before full resolution, as the default by 3,000
+    c.background.sh_degree_interval = 150;  // half the static interval, as in the default
+    c.means_lr_decay_steps = 3000;  // positions settle by the end of this run, not of 30,000 steps
+    c.densify.warmup = 200;
+    c.densify.stop_split_at = 2500;        // the last 500 steps settle what densification added
+    c.densify.stop_screen_size_at = 1000;  // the coarse third only, as the default's 4,000 ends early
+    c.densify.reset_alpha_every = 10;      // opacity resets at steps 1,000 and 2,000 (30 would never fire)
+    c.distractors.refine_every_epochs = 3;  // at 10, each buffer would be refined only ~5 times in the run
+    return c;
+  }
   if (name == "paper") {
     c.densify.stats.normalize_each_step = false;
     c.densify.stats.visible_count_from_one = true;

@@ -131,6 +131,16 @@ bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float ste
   return bad != 0;
 }
 
+AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a) {
+  ++step;
+  const double bc2 = 1.0 - std::pow(double(a.beta2), double(step));
+  return {1.0 - std::pow(double(a.beta1), double(step)), float(std::sqrt(bc2))};
+}
+
+bool all_finite(std::span<const float> values) {
+  return std::all_of(values.begin(), values.end(), [](float x) { return std::isfinite(x); });
+}
+
 namespace {
 bool row_finite(const float* p, const float* m, const float* v, int width) {
   for (int k = 0; k < width; ++k)
@@ -141,10 +151,9 @@ bool row_finite(const float* p, const float* m, const float* v, int width) {
 
 void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a,
                                      int trained_color_floats) {
-  ++adam_step;
-  const double bc1 = 1.0 - std::pow(double(a.beta1), double(adam_step));
-  const double bc2 = 1.0 - std::pow(double(a.beta2), double(adam_step));
-  const float sqrt_bc2 = float(std::sqrt(bc2));
+  const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
+  const double bc1 = bc.bc1;
+  const float sqrt_bc2 = bc.sqrt_bc2;
   const int64_t n = static_cast<int64_t>(size());
   nonfinite_groups.clear();
   // Rows in blocks: each block's groups are updated by one thread (the result does not

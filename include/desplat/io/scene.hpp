@@ -72,6 +72,8 @@ struct SceneError : std::runtime_error {
 };
 
 using WarningSink = std::function<void(const std::string&)>;
+// Passes `message` to `sink`, or prints "desplat: warning: <message>" on stderr when it is empty.
+void report_warning(const WarningSink& sink, const std::string& message);
 
 struct SceneOptions {
   int downscale = 1;                  // 1, 2, 4, 8, … (any integer ≥ 1)

@@ -5,17 +5,20 @@
 // Grid file (JSON; unknown keys are errors naming the file):
 //   {
 //     "scenes": ["out/bench", "out/bench_clutter_040"],  // relative to the grid file's folder
-//     "steps": 7000,          // per run unless the run's config sets "iterations"
+//     "steps": 7000,          // per run unless the run's preset or config sets "iterations"
 //     "eval_every": 500,      // a point on every curve each N steps (and at the end)
 //     "threads": 0,           // OpenMP threads, 0 = all cores
 //     "score_at": "full",     // test views at "full" resolution or at each run's "training" one
 //     "runs": [               // one curve per run and scene
 //       {"name": "DeSplat", "config": {}},
 //       {"name": "static-only", "config": {"distractors": {"enabled": false}}},
-//       {"name": "DeSplat, 1/2 res", "downscale": 2, "config": {"sh_degree": 1}}
+//       {"name": "DeSplat, 1/2 res", "downscale": 2, "config": {"sh_degree": 1}},
+//       {"name": "fast", "preset": "fast"}  // train/presets.hpp; its length is the preset's
 //     ]
 //   }
-// "config" holds TrainConfig overrides in config.json's format (train_config_json.hpp).
+// "config" holds TrainConfig overrides in config.json's format (train_config_json.hpp), applied
+// on top of the run's "preset" (default: "default"), as desplat_train --preset --config does.
+// A run with a preset trains for the preset's iterations unless its config sets them.
 // With "score_at": "full" (the default) test views are scored at full resolution whatever a
 // run's training downscale, so runs at different resolutions are comparable; "training"
 // scores them at the run's own resolution (for comparing settings at one low resolution,
@@ -41,11 +44,14 @@
 #include <string>
 #include <vector>
 
+#include "desplat/train/trainer.hpp"
+
 namespace desplat {
 
 struct BenchRun {
   std::string name;
   nlohmann::json config = nlohmann::json::object();  // TrainConfig overrides
+  std::string preset;                                 // train/presets.hpp; empty: "default", grid's steps
   int downscale = 1;
 };
 
@@ -61,6 +67,11 @@ struct BenchGrid {
 // Throws std::invalid_argument naming the file for unreadable or invalid grids (bad JSON,
 // unknown keys, no scenes or runs, duplicate run names, a config TrainConfig rejects).
 BenchGrid read_bench_grid(const std::filesystem::path& file);
+
+// The training settings of one run: its preset, its config on top, the grid's steps (unless
+// the run has a preset or sets "iterations") and threads. Throws std::invalid_argument for an
+// unknown preset or a config TrainConfig rejects.
+TrainConfig bench_run_config(const BenchGrid& grid, const BenchRun& run);
 
 struct BenchPoint {
   std::string scene, run;

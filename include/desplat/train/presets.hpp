@@ -1,4 +1,6 @@
 // Named starting configurations for desplat_train --preset (docs/METHOD.md §7, presets):
+//   "fast"     a 3,000-step preview: the default's schedule (resolution, SH, position decay,
+//              densification, opacity resets, distractor refinement) fitted into 3,000 steps;
 //   "default"  TrainConfig{}: the choices that measure best (docs/bench/issue17_ab.md);
 //   "paper"    the authors' code's behaviour, for reproducing the paper: their densification
 //              statistics and split rule, 1,000 distractors per view whatever the image

@@ -42,6 +42,17 @@ struct AdamSettings {
 bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float step_size, float sqrt_bc2,
                const AdamSettings& a);
 
+// One Adam step's bias corrections: bc1 = 1 − β1^t (step sizes are rate / bc1) and
+// √(1 − β2^t) for adam_span, after advancing the step count t by one.
+struct AdamBiasCorrection {
+  double bc1;
+  float sqrt_bc2;
+};
+AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a);
+
+// Whether every value is finite (a gradient that may enter Adam).
+bool all_finite(std::span<const float> values);
+
 struct TrainableGaussians {
   GaussianSet params;
   std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params
