@@ -9,11 +9,13 @@
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <numbers>
+#include <numeric>
 #include <random>
 #include <sstream>
 
@@ -639,6 +641,60 @@ std::vector<std::string> calls_of(const fs::path& args_log, const std::string& s
   for (std::string line; std::getline(in, line);)
     if (line.rfind(stage + " ", 0) == 0) lines.push_back(line);
   return lines;
+}
+
+// Above kExhaustiveMaxImages photos, --matcher auto reads them to judge their order: frames of
+// a pan along a wall of random tiles, named in order, are matched sequentially; the same
+// photos under shuffled names, exhaustively. The reason reaches the log and the result.
+TEST_F(FakeColmap, AutoMatcherFollowsTheOrderOfALargeCapture) {
+  const int n = sfm::kExhaustiveMaxImages + 1;
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> tone(0.0f, 1.0f);
+  std::vector<float> tiles(size_t((64 + 2 * n) / 8 + 1) * 4 * 3);
+  for (float& t : tiles) t = tone(rng);
+  std::vector<int> slot(n);  // photo k is saved under the name of slot[k]
+  std::iota(slot.begin(), slot.end(), 0);
+  for (const bool shuffled : {false, true}) {
+    SCOPED_TRACE(shuffled ? "shuffled names" : "names in order");
+    if (shuffled) std::shuffle(slot.begin(), slot.end(), rng);
+    const fs::path dir = tmp_.path() / (shuffled ? "shuffled" : "ordered");
+    fs::create_directories(dir);
+    colmap::Model model = fake_model(0);
+    for (int k = 0; k < n; ++k) {
+      desplat::FloatImage im{64, 32, 3, std::vector<float>(64 * 32 * 3)};
+      for (int y = 0; y < 32; ++y)
+        for (int x = 0; x < 64; ++x)
+          for (int c = 0; c < 3; ++c)
+            im.pixels[(size_t(y) * 64 + x) * 3 + c] = tiles[(((x + 2 * k) / 8) * 4 + y / 8) * 3 + c];
+      char name[32];
+      std::snprintf(name, sizeof name, "f%03d.png", slot[k]);
+      desplat::write_image(dir / name, im);
+      colmap::Image image;
+      image.id = static_cast<uint32_t>(k + 1);
+      image.camera_id = 1;
+      image.name = name;
+      model.images[image.id] = image;
+    }
+    colmap::write_model_binary(model, tmp_.path() / (shuffled ? "m_shuffled" : "m_ordered") / "0");
+    models_env_.emplace("FAKE_COLMAP_MODELS", (tmp_.path() / (shuffled ? "m_shuffled" : "m_ordered")).string());
+    options_.images = dir;
+    options_.out = tmp_.path() / (shuffled ? "out_shuffled" : "out_ordered");
+    fs::remove(args_log_);
+    const sfm::SfmResult r = sfm::run_sfm(options_);
+    EXPECT_EQ(r.num_registered, n);
+    const sfm::Matcher expected = shuffled ? sfm::Matcher::Exhaustive : sfm::Matcher::Sequential;
+    EXPECT_EQ(r.matcher, expected);
+    EXPECT_EQ(calls_of(args_log_, std::string(sfm::matcher_name(expected)) + "_matcher").size(), 1u);
+    EXPECT_CONTAINS(r.matcher_reason, shuffled ? "not in file-name order" : "taken in order");
+    EXPECT_CONTAINS(slurp(r.log), r.matcher_reason);
+  }
+  // Below the limit the photos are not read: every pair is matched whatever their order.
+  options_.images = photos_;
+  options_.out = tmp_.path() / "out_small";
+  give_models({6});
+  const sfm::SfmResult small = sfm::run_sfm(options_);
+  EXPECT_EQ(small.matcher, sfm::Matcher::Exhaustive);
+  EXPECT_EQ(small.matcher_reason, "exhaustive: 6 photos are few enough to match every pair");
 }
 
 TEST_F(FakeColmap, EscalatesStepByStepUntilNinetyPercentArePlacedAndKeepsTheLargestModel) {

@@ -12,9 +12,7 @@ namespace sfm = desplat::sfm;
 namespace {
 
 TEST(SfmHelpers, MatcherChoiceAndDefaults) {
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 100), sfm::Matcher::Exhaustive);
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Auto, 101), sfm::Matcher::Sequential);
-  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Spatial, 5), sfm::Matcher::Spatial);
+  EXPECT_EQ(sfm::choose_matcher(sfm::Matcher::Spatial, 5, true), sfm::Matcher::Spatial);  // the rest: test_sfm_order
   EXPECT_EQ(sfm::matcher_from_name("sequential"), sfm::Matcher::Sequential);
   EXPECT_EQ(sfm::matcher_from_name("Sequential"), std::nullopt);
   EXPECT_EQ(sfm::required_registered(0.5, 1), 3);  // never fewer than 3

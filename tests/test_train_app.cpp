@@ -462,8 +462,10 @@ TEST_F(TrainApp, PhotosStructureFromMotionLostAreNamedInLogMetricsAndReport) {
   ASSERT_EQ(sfm["attempts"].size(), 1u);  // 16 of 17 is above 90 %: no escalation
   EXPECT_EQ(sfm["attempts"][0]["step"], "colmap defaults");
   EXPECT_EQ(sfm["warning"], "");
+  EXPECT_EQ(sfm["matching"], "exhaustive: 17 photos are few enough to match every pair");
   const std::string report = desplat::testing::slurp(out / "report.html");
   EXPECT_NE(report.find("<h2>Structure from motion</h2>"), std::string::npos);
+  EXPECT_NE(report.find("<tr><th>matching</th><td>exhaustive: 17 photos are few enough"), std::string::npos);
   // The stand-in wrote no database, so the reason is that it could not be read.
   EXPECT_EQ(sfm["unregistered_photos"][0]["reason"], "not in the model (colmap's database could not be read)");
   EXPECT_NE(report.find("<tr><th>extra.png</th><td>not in the model (colmap&#39;s database could not be read)"),

@@ -223,6 +223,7 @@ std::string structure_from_motion(const json& m) {
                                 shown(number(sfm, "mean_track_length"), 2) + ", mean reprojection error " +
                                 shown(number(sfm, "mean_reprojection_error_px"), 2) + " px");
   s += row("cameras", sfm.value("cameras", std::string("?")));
+  if (sfm.contains("matching")) s += row("matching", sfm.value("matching", std::string("?")));
   if (!sfm.value("warning", std::string()).empty()) s += row("warning", sfm["warning"].get<std::string>());
   s += "</table>\n<table><tr><th>step</th><th>photos placed</th><th>points</th><th>time</th><th>settings</th></tr>\n";
   for (const json& a : sfm.value("attempts", json::array()))

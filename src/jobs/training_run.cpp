@@ -175,6 +175,7 @@ json sfm_json(const sfm::SfmResult& r) {
           {"models", r.num_models},
           {"seconds", r.seconds},
           {"cameras", r.cameras.reason},
+          {"matching", r.matcher_reason},
           {"attempts", attempts},
           {"warning", r.warning},
           {"skipped_files", skipped},

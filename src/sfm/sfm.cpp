@@ -747,6 +747,22 @@ Candidate install_winner(const Context& c, Candidate best) {
   return Candidate{{l.database, l.sparse_root}, collect_models(l.sparse_root)};
 }
 
+// The matcher and why, for the log. Only a large capture with --matcher auto reads its photos
+// to judge their order: below kExhaustiveMaxImages every pair is matched whatever the order.
+std::pair<Matcher, std::string> resolve_matcher(const SfmOptions& o, const std::vector<fs::path>& photos) {
+  const int n = static_cast<int>(photos.size());
+  if (o.matcher != Matcher::Auto)
+    return {o.matcher, std::string(matcher_name(o.matcher)) + ", as asked (--matcher " + matcher_name(o.matcher) + ")"};
+  if (n <= kExhaustiveMaxImages)
+    return {Matcher::Exhaustive, "exhaustive: " + std::to_string(n) + " photos are few enough to match every pair"};
+  const CaptureOrder order = detect_capture_order(o.images, photos);
+  const Matcher m = choose_matcher(Matcher::Auto, n, order.ordered);
+  return {m, std::string(matcher_name(m)) + ": " + std::to_string(n) + " photos, " + order.reason +
+                 (m == Matcher::Exhaustive ? "; every pair is matched, which takes time growing with the square "
+                                             "of the number of photos"
+                                           : "; each photo is matched with its neighbours in name order")};
+}
+
 }  // namespace
 
 // ---- Public ------------------------------------------------------------------------------
@@ -767,9 +783,9 @@ const char* matcher_name(Matcher matcher) {
   return "?";
 }
 
-Matcher choose_matcher(Matcher requested, int num_images) {
+Matcher choose_matcher(Matcher requested, int num_images, bool photos_in_order) {
   if (requested != Matcher::Auto) return requested;
-  return num_images <= kExhaustiveMaxImages ? Matcher::Exhaustive : Matcher::Sequential;
+  return num_images > kExhaustiveMaxImages && photos_in_order ? Matcher::Sequential : Matcher::Exhaustive;
 }
 
 int required_registered(double share, int num_images) {
@@ -806,7 +822,7 @@ std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
 }
 
 std::string describe_attempts(const SfmResult& r) {
-  std::string text = "cameras: " + r.cameras.reason + "\n";
+  std::string text = "cameras: " + r.cameras.reason + "\nmatching: " + r.matcher_reason + "\n";
   for (const SfmAttempt& a : r.attempts) {
     char line[160];
     std::snprintf(line, sizeof line, "  %-18s %d of %d photos, %d points, %.0f s", (a.step + ":").c_str(),
@@ -829,12 +845,13 @@ SfmResult run_sfm(const SfmOptions& o) {
   const int min_registered = resolve_min_registered(o, num_photos);
   const CameraChoice cameras = choose_cameras(o.cameras, scan.cameras);
 
-  const Matcher matcher = choose_matcher(o.matcher, num_photos);
+  const auto [matcher, matcher_reason] = resolve_matcher(o, scan.photos);
   Context c{colmap_exe, Layout(o.out), {}, o.on_progress, num_photos, matcher, o.stage_time_limit_s};
   prepare_output(o, c.layout, scan.photos);
   c.log.open(c.layout.log, std::ios::binary | std::ios::trunc);
   if (!c.log) fail(SfmErrorKind::OutputExists, "cannot write the log file " + in_quotes(c.layout.log));
-  c.log << "######## desplat_sfm: " << num_photos << " photos; " << cameras.reason << "\n" << std::flush;
+  c.log << "######## desplat_sfm: " << num_photos << " photos; " << cameras.reason << "\n######## matching: "
+        << matcher_reason << "\n" << std::flush;
 
   Ladder ladder{c, o, min_registered, cameras.single};
   const std::string model = o.camera_model.empty() ? auto_camera_model(cameras.single) : o.camera_model;
@@ -851,6 +868,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   r.database = c.layout.database;
   r.log = c.layout.log;
   r.matcher = matcher;
+  r.matcher_reason = matcher_reason;
   r.cameras = cameras;
   r.attempts = ladder.attempts;
   r.num_photos = num_photos;

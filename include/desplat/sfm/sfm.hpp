@@ -34,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include "desplat/core/image.hpp"
 #include "desplat/sfm/subprocess.hpp"
 
 namespace desplat::sfm {
@@ -60,17 +61,63 @@ class SfmError : public std::runtime_error {
 
 enum class Matcher { Auto, Exhaustive, Sequential, Spatial };
 
-// Auto: exhaustive for up to this many photos, sequential above. Exhaustive matching costs
+// Auto: exhaustive for up to this many photos; above it, sequential when the photos were taken
+// in file-name order (judge_capture_order), exhaustive otherwise. Exhaustive matching costs
 // O(n²) image pairs: 50 fox photos at 540×960 took 5.4 min on 2 cores (0.26 s per pair), so 100
 // photos is ~20 min, and 300 would be ~3 h; sequential matching (each photo against its 10
-// neighbours in file-name order, plus quadratic overlap) is linear in n.
+// neighbours in file-name order, plus quadratic overlap) is linear in n, but it only pairs
+// photos that are near each other in name order, so on a shuffled collection it matches
+// almost nothing. colmap's vocabulary-tree matcher would be the linear choice for a large
+// collection, but it needs a trained tree file that Debian's colmap does not ship.
 inline constexpr int kExhaustiveMaxImages = 100;
 
 // "auto", "exhaustive", "sequential", "spatial" (exact); nullopt otherwise.
 std::optional<Matcher> matcher_from_name(const std::string& name);
 const char* matcher_name(Matcher matcher);
-// Auto resolved for `num_images` photos; any other value is returned unchanged.
-Matcher choose_matcher(Matcher requested, int num_images);
+// Auto resolved for `num_images` photos that were (`photos_in_order`) or were not taken in
+// file-name order; any other value is returned unchanged.
+Matcher choose_matcher(Matcher requested, int num_images, bool photos_in_order);
+
+// ---- Ordered frames or an unordered collection ----------------------------------------------
+//
+// A photo in a capture taken in order (video frames, a walk around an object) shares most of
+// its view with the photos named next to it; in a collection, or a capture whose names do not
+// follow it, a neighbour in name order is as unlike it as any other photo. So: each photo
+// becomes a tiny colour thumbnail, each channel normalized to zero mean and unit variance
+// (exposure, gain and white balance do not count), and the median distance between neighbours
+// in name order is compared with the median distance between photos half the capture apart.
+// Without order both medians sample the same distribution (ratio ≈ 1).
+inline constexpr int kOrderThumbnailSize = 8;  // cells per side: the coarse layout of the view
+inline constexpr int kOrderThumbnailValues = 3 * kOrderThumbnailSize * kOrderThumbnailSize;  // RGB planes
+// Two thumbnails are compared at the best of the shifts of up to this many cells each way: a
+// camera that moved a little sees the same things a little moved across the frame.
+inline constexpr int kOrderMaxShift = 1;
+// Ordered when neighbours are at most this fraction as far apart as photos half the capture
+// apart. Shuffled captures of 40 or more photos measure 0.93–1.06 (docs/bench/
+// issue19_registration.md), and the spread shrinks with more photos; the bar sits below that
+// because the two mistakes do not cost the same: an ordered capture taken for a collection is
+// matched exhaustively (slower, every pair still found), a collection taken for ordered frames
+// is matched sequentially and loses the pairs far apart in name order.
+inline constexpr double kOrderedDistanceRatio = 0.8;
+
+struct CaptureOrder {
+  bool ordered = false;
+  // Median RMS difference of the thumbnails (each pair at its best shift): of neighbours in
+  // name order, and of photos half the capture apart.
+  double neighbour_distance = 0, far_distance = 0;
+  std::string reason;             // for the log
+};
+
+// The thumbnail of an image: kOrderThumbnailValues floats, three planes (R, G, B; a grey image
+// gives the same plane thrice) of kOrderThumbnailSize² box-filtered cells, row-major, each plane
+// normalized to zero mean and unit variance; the aspect ratio is not kept. A flat plane is zeros.
+std::vector<float> order_thumbnail(const FloatImage& image);
+// The judgement for thumbnails in file-name order; needs at least 4 (fewer: not ordered).
+CaptureOrder judge_capture_order(const std::vector<std::vector<float>>& thumbnails);
+// Reads the photos (relative to `dir`, in file-name order) and judges them. A photo that cannot
+// be decoded counts as a flat image.
+CaptureOrder detect_capture_order(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& photos);
+
 // Photos a model must hold for a run to succeed: max(3, ⌈share·n⌉) of n photos. The default
 // share, one half: fewer than half placed means the capture mostly failed, and training on the
 // rest would drop most of the user's photos. Three is the least a model can be trusted with.
@@ -179,6 +226,7 @@ struct SfmResult {
   std::filesystem::path database;    // <out>/database.db
   std::filesystem::path log;         // <out>/colmap.log
   Matcher matcher = Matcher::Exhaustive;  // as resolved
+  std::string matcher_reason;             // why (for the log): "exhaustive: 50 photos, ..."
   CameraChoice cameras;                   // as resolved, with its reason
   std::vector<SfmAttempt> attempts;       // the first run, then each escalation step, in order
   std::string warning;                    // non-empty when fewer than kEscalateBelowShare are placed
