@@ -340,7 +340,7 @@ TEST(UserMasks, TrainingDataCarriesTheMaskAndZeroesIgnoredPixels) {
   int ignored = 0;
   for (int p = 0; p < kW * kH; ++p) {
     const bool inside = p % kW >= 20 && p % kW < 26 && p / kW >= 10 && p / kW < 14;
-    EXPECT_EQ(v.keep[p], inside ? 0.0f : 1.0f) << p;
+    EXPECT_EQ(v.keep[p], inside ? 0 : 1) << p;
     if (inside) {
       ++ignored;
       EXPECT_EQ(v.image.pixels[3 * p] + v.image.pixels[3 * p + 1] + v.image.pixels[3 * p + 2], 0) << p;

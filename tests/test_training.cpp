@@ -218,7 +218,7 @@ namespace {
 
 // The user's mask (TrainView::keep): a rectangle ignored in every other view.
 void mask_rectangle(TrainView& v, int x0, int y0, int w, int h) {
-  v.keep.assign(size_t(v.camera.width) * v.camera.height, 1.0f);
+  v.keep.assign(size_t(v.camera.width) * v.camera.height, 1);
   for (int y = y0; y < y0 + h; ++y)
     for (int x = x0; x < x0 + w; ++x) v.keep[size_t(y) * v.camera.width + x] = 0;
 }
@@ -276,10 +276,10 @@ TEST(Training, MaskedPaintedOccluderTrainsExactlyAsTheCleanCapture) {
 
 TEST(Training, AMaskOfTheWrongSizeOrWithOtherValuesIsRefused) {
   TrainingData data = synthetic_training_data(4, 64, 48, 5);
-  data.train[1].keep.assign(10, 1.0f);
+  data.train[1].keep.assign(10, 1);
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(data, short_config(1)); }),
                   "view " + data.train[1].name + ": its mask has 10 values for 64x48 pixels");
-  data.train[1].keep.assign(64 * 48, 0.5f);
+  data.train[1].keep.assign(64 * 48, 2);
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(data, short_config(1)); }),
                   "only 0 (ignore) and 1 (use)");
 }

@@ -202,7 +202,8 @@ TrainingData load_training_data(const Scene& scene) {
       for (size_t k = 0; k < photo.pixels.size() && !rounded[i]; ++k)
         rounded[i] = byte_to_float(views[i].image.pixels[k]) != photo.pixels[k];
       if (!scene.views[i].user_mask_path.empty()) {
-        views[i].keep = load_view_keep_mask(scene, i);
+        const std::vector<float> keep = load_view_keep_mask(scene, i);  // exactly 0 or 1
+        views[i].keep.assign(keep.begin(), keep.end());
         // What the mask hides is never read: zero it, so no rule can use it by accident.
         for (size_t p = 0; p < views[i].keep.size(); ++p)
           if (views[i].keep[p] == 0) views[i].image.pixels[3 * p] = views[i].image.pixels[3 * p + 1] = views[i].image.pixels[3 * p + 2] = 0;

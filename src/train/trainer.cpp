@@ -74,7 +74,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
         throw std::invalid_argument("view " + v.name + ": its mask has " + std::to_string(v.keep.size()) +
                                     " values for " + std::to_string(v.camera.width) + "x" +
                                     std::to_string(v.camera.height) + " pixels");
-      if (std::any_of(v.keep.begin(), v.keep.end(), [](float k) { return k != 0.0f && k != 1.0f; }))
+      if (std::any_of(v.keep.begin(), v.keep.end(), [](uint8_t k) { return k > 1; }))
         throw std::invalid_argument("view " + v.name + ": its mask must hold only 0 (ignore) and 1 (use)");
     }
   // SSIM (the loss, the evaluation) needs 11×11 pixels, at the coarsest level of the
@@ -164,24 +164,28 @@ const FloatImage& Trainer::target_at(int view, int factor) {
 }
 
 std::span<const float> Trainer::keep_at(int view, int factor) {
-  const std::vector<float>& full = data_.train[view].keep;
-  if (full.empty() || factor == 1) return full;
-  int level = 0;
-  while ((2 << level) < factor) ++level;
-  if (downscaled_keep_.empty()) downscaled_keep_.resize(data_.train.size());
-  auto& cache = downscaled_keep_[view];
-  const Camera& cam = data_.train[view].camera;
-  while (static_cast<int>(cache.size()) <= level) {
-    // A coarse pixel is kept only when every pixel it covers is: one that mixes in an ignored
-    // pixel (whose photo value is meaningless) is ignored too.
-    const int f = 2 << cache.size(), w = std::max(1, cam.width / f), h = std::max(1, cam.height / f);
-    std::vector<float> keep(size_t(w) * h, 1.0f);
-    for (int y = 0; y < h * f && y < cam.height; ++y)
-      for (int x = 0; x < w * f && x < cam.width; ++x)
-        if (full[size_t(y) * cam.width + x] == 0) keep[size_t(y / f) * w + x / f] = 0;
-    cache.push_back(std::move(keep));
+  const std::vector<uint8_t>* mask = &data_.train[view].keep;
+  if (mask->empty()) return {};
+  if (factor > 1) {
+    int level = 0;
+    while ((2 << level) < factor) ++level;
+    if (downscaled_keep_.empty()) downscaled_keep_.resize(data_.train.size());
+    auto& cache = downscaled_keep_[view];
+    const Camera& cam = data_.train[view].camera;
+    while (static_cast<int>(cache.size()) <= level) {
+      // A coarse pixel is kept only when every pixel it covers is: one that mixes in an ignored
+      // pixel (whose photo value is meaningless) is ignored too.
+      const int f = 2 << cache.size(), w = std::max(1, cam.width / f), h = std::max(1, cam.height / f);
+      std::vector<uint8_t> keep(size_t(w) * h, 1);
+      for (int y = 0; y < h * f && y < cam.height; ++y)
+        for (int x = 0; x < w * f && x < cam.width; ++x)
+          if ((*mask)[size_t(y) * cam.width + x] == 0) keep[size_t(y / f) * w + x / f] = 0;
+      cache.push_back(std::move(keep));
+    }
+    mask = &cache[level];
   }
-  return cache[level];
+  keep_.assign(mask->begin(), mask->end());
+  return keep_;
 }
 
 namespace {
@@ -206,9 +210,11 @@ StepStats Trainer::step() {
   stats.step = step_;
   const int view = next_view();
   const int factor = config_.downscale_at(step_);
-  if (factor == 1)  // the schedule never goes back to a coarser level: give the pyramid's memory back
+  if (factor == 1) {  // the schedule never goes back to a coarser level: give the pyramid's memory back
     for (std::vector<ByteImage>& levels : downscaled_)
       if (!levels.empty()) std::vector<ByteImage>().swap(levels);
+    std::vector<std::vector<std::vector<uint8_t>>>().swap(downscaled_keep_);
+  }
   const Camera cam = downscale_camera(data_.train[view].camera, factor);
   const FloatImage& target = target_at(view, factor);
   const std::span<const float> keep = keep_at(view, factor);
@@ -557,7 +563,7 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
     // The halves: the right one is scored under either protocol; the left one is where the
     // Photo Tourism protocol fits a model's embeddings (the view's own mask applies to both).
     const int w = v.camera.width, h = v.camera.height;
-    std::vector<float> left(size_t(w) * h, 0.0f), right(size_t(w) * h, 0.0f);
+    std::vector<float> left(size_t(w) * h, 0.0f), right(size_t(w) * h, 0.0f), whole;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const size_t p = size_t(y) * w + x;
@@ -574,8 +580,9 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
     if (m.protocol == EvalProtocol::appearance_halves) {
       m.psnr = m.psnr_right_half, m.ssim = m.ssim_right_half;
     } else {
-      m.psnr = psnr(img.pixels, photo.pixels, v.keep);
-      m.ssim = ssim(img.pixels, photo.pixels, w, h, v.keep);
+      whole.assign(v.keep.begin(), v.keep.end());  // empty when the view has no mask
+      m.psnr = psnr(img.pixels, photo.pixels, whole);
+      m.ssim = ssim(img.pixels, photo.pixels, w, h, whole);
     }
     out.push_back(std::move(m));
   }

@@ -35,10 +35,11 @@ struct TrainView {
   Camera camera;      // undistorted pinhole, normalized frame, full training resolution
   ByteImage image;    // [H, W, 3] matching the camera, 8 bits per channel (core/image.hpp)
   // Optional [H·W], the user's mask (docs/METHOD.md §4, masks): 1 = use the pixel, 0 = ignore
-  // it; empty = use every pixel. An ignored pixel leaves the loss, SSIM, the regularizers, the
-  // residual statistics, the densification statistics and the metrics; its image value is
-  // never read for training (the loader sets it to 0).
-  std::vector<float> keep;
+  // it; empty = use every pixel. One byte per pixel, like the photo's channels: a float mask
+  // would take more memory than the photo. An ignored pixel leaves the loss, SSIM, the
+  // regularizers, the residual statistics, the densification statistics and the metrics; its
+  // image value is never read for training (the loader sets it to 0).
+  std::vector<uint8_t> keep;
 };
 
 struct TrainingData {
@@ -274,8 +275,10 @@ class Trainer {
   // resolution schedule first needs them and freed once it has reached full resolution.
   std::vector<std::vector<ByteImage>> downscaled_;
   FloatImage target_;  // this step's photo in float, at the step's resolution
-  // Per view with a mask: the mask at factor 2, 4, … (a pixel is kept when all it covers is).
-  std::vector<std::vector<std::vector<float>>> downscaled_keep_;
+  // Per view with a mask: the mask at factor 2, 4, … (a pixel is kept when all it covers is),
+  // freed with downscaled_.
+  std::vector<std::vector<std::vector<uint8_t>>> downscaled_keep_;
+  std::vector<float> keep_;  // this step's mask in float (the losses weigh pixels with it)
   // Scratch reused every step.
   LayerPass static_pass_, distractor_pass_;
   BackgroundPass background_pass_;
@@ -285,7 +288,9 @@ class Trainer {
   int next_view();
   // The view's photo at 1/factor resolution, converted into target_ (valid until the next call).
   const FloatImage& target_at(int view, int factor);
-  std::span<const float> keep_at(int view, int factor);  // empty when the view has no mask
+  // The view's mask at 1/factor resolution, converted into keep_ (valid until the next call);
+  // empty when the view has no mask.
+  std::span<const float> keep_at(int view, int factor);
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
