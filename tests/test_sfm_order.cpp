@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -83,6 +84,10 @@ TEST(CaptureOrder, MediansOfNeighboursAndOfPhotosHalfTheCaptureApart) {
   r = judged({0, 1, 2});
   EXPECT_FALSE(r.ordered);
   EXPECT_NE(r.reason.find("too few photos"), std::string::npos) << r.reason;
+  // A thumbnail of the wrong length is refused, not read past its end.
+  std::vector<std::vector<float>> wrong(4, std::vector<float>(sfm::kOrderThumbnailValues, 0.0f));
+  wrong[2].resize(10);
+  EXPECT_THROW(sfm::judge_capture_order(wrong), std::invalid_argument);
 }
 
 // The shift search: a view moved by one cell is at distance 0 from the original; moved by two

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
+#include <string>
 
 #include "desplat/core/statistics.hpp"
 #include "desplat/io/image_io.hpp"
@@ -77,6 +79,11 @@ double thumbnail_distance(const std::vector<float>& a, const std::vector<float>&
 
 CaptureOrder judge_capture_order(const std::vector<std::vector<float>>& thumbnails) {
   const size_t n = thumbnails.size();
+  for (const std::vector<float>& t : thumbnails)
+    if (t.size() != size_t(kOrderThumbnailValues))
+      throw std::invalid_argument("judge_capture_order: a thumbnail has " + std::to_string(t.size()) +
+                                  " values, expected " + std::to_string(kOrderThumbnailValues) +
+                                  " (order_thumbnail's)");
   CaptureOrder r;
   if (n < 4) {
     r.reason = "too few photos (" + std::to_string(n) + ") to tell whether they are in order";

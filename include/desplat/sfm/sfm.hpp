@@ -113,6 +113,7 @@ struct CaptureOrder {
 // normalized to zero mean and unit variance; the aspect ratio is not kept. A flat plane is zeros.
 std::vector<float> order_thumbnail(const FloatImage& image);
 // The judgement for thumbnails in file-name order; needs at least 4 (fewer: not ordered).
+// std::invalid_argument when a thumbnail is not kOrderThumbnailValues long.
 CaptureOrder judge_capture_order(const std::vector<std::vector<float>>& thumbnails);
 // Reads the photos (relative to `dir`, in file-name order) and judges them. A photo that cannot
 // be decoded counts as a flat image.
