@@ -88,6 +88,63 @@ TEST(Adam, MatchesPyTorchPerGroupAndSkipsInactiveBands) {
   }
 }
 
+// Selective Adam: a row not selected keeps its values and both moments bit for bit; a
+// selected row follows PyTorch's Adam with the global step count (bias correction), so a
+// row skipped for a while resumes with the step count the others reached.
+TEST(Adam, SelectiveUpdateLeavesUnselectedRowsAndUsesTheGlobalStepCount) {
+  std::mt19937 rng(7);
+  const size_t n = 1300;  // runs of selected rows cross the update's 512-row blocks
+  TrainableGaussians t(random_set(rng, n, 0));
+  LearningRates lr;
+  std::array<std::vector<Reference>, kParamGroups> ref;
+  for (int k = 0; k < kParamGroups; ++k)
+    for (float x : t.param(ParamGroup(k))) ref[k].push_back({double(x)});
+  const AdamSettings a;
+  std::bernoulli_distribution coin(0.6);
+  for (int step = 1; step <= 5; ++step) {
+    std::vector<uint8_t> rows(n);
+    for (size_t i = 0; i < n; ++i) rows[i] = uint8_t(coin(rng));
+    for (size_t i = 505; i < 530; ++i) rows[i] = 1;  // a run across a block boundary
+    const TrainableGaussians before = t;
+    const RasterGradients grads = random_grads(rng, t.params);
+    t.adam_update(grads, lr, a, -1, rows);
+    for (int k = 0; k < kParamGroups; ++k) {
+      const ParamGroupInfo& info = kParamGroupTable[k];
+      const size_t width = size_t(t.floats_per_gaussian(info.id));
+      const std::vector<float>& g = grads.*info.grads;
+      for (size_t j = 0; j < ref[k].size(); ++j) {
+        const size_t row = j / width;
+        if (!rows[row]) {
+          ASSERT_EQ(t.param(info.id)[j], before.param(info.id)[j]) << info.name << " row " << row;
+          ASSERT_EQ(t.adam_m[k][j], before.adam_m[k][j]);
+          ASSERT_EQ(t.adam_v[k][j], before.adam_v[k][j]);
+          continue;
+        }
+        reference_step(ref[k][j], g[j], lr.*info.rate, step, a);
+        ASSERT_NEAR(t.param(info.id)[j], ref[k][j].p, 2e-6 + 1e-3 * lr.*info.rate)
+            << info.name << " value " << j << " step " << step;
+      }
+    }
+  }
+  EXPECT_EQ(t.adam_step, 5);
+}
+
+// Every row selected is the plain update, bit for bit; a selection of the wrong length is an error.
+TEST(Adam, SelectingEveryRowEqualsTheDenseUpdate) {
+  std::mt19937 rng(8);
+  TrainableGaussians dense(random_set(rng, 700, 1)), selective = dense;
+  const RasterGradients grads = random_grads(rng, dense.params);
+  dense.adam_update(grads, LearningRates{}, AdamSettings{}, 3);
+  selective.adam_update(grads, LearningRates{}, AdamSettings{}, 3, std::vector<uint8_t>(700, 1));
+  for (int k = 0; k < kParamGroups; ++k) {
+    EXPECT_EQ(dense.param(ParamGroup(k)), selective.param(ParamGroup(k))) << kParamGroupTable[k].name;
+    EXPECT_EQ(dense.adam_m[k], selective.adam_m[k]);
+    EXPECT_EQ(dense.adam_v[k], selective.adam_v[k]);
+  }
+  EXPECT_THROW(selective.adam_update(grads, LearningRates{}, AdamSettings{}, 3, std::vector<uint8_t>(699, 1)),
+               std::logic_error);
+}
+
 TEST(Adam, ReportsTheRowsAndGroupsThatWentNonFinite) {
   std::mt19937 rng(6);
   TrainableGaussians t(random_set(rng, 1100, 0));

@@ -134,6 +134,32 @@ TEST(Training, NonFiniteGaussianIsPrunedAndTrainingContinues) {
     for (float v : trainer.mutable_gaussians().param(ParamGroup(g))) ASSERT_TRUE(std::isfinite(v));
 }
 
+// With selective Adam a Gaussian the step's view does not see keeps its parameters and
+// moments bit for bit; the default (dense) Adam keeps moving it along its momentum.
+TEST(Training, SelectiveAdamLeavesAGaussianOutsideTheViewAlone) {
+  const TrainingData data = synthetic_training_data(8, 64, 48, 5);
+  for (const bool selective : {true, false}) {
+    TrainConfig c = short_config(50);
+    c.selective_adam = selective;
+    Trainer trainer(data, c);
+    for (int i = 0; i < 3; ++i) trainer.step();  // Gaussian 0 gathers momentum
+    TrainableGaussians& g = trainer.mutable_gaussians();
+    ASSERT_NE(g.adam_m[int(ParamGroup::OpacityLogits)][0], 0.0f);
+    for (int k = 0; k < 3; ++k) g.params.means[k] = 1e6f;  // far outside every view
+    const TrainableGaussians before = g;
+    trainer.step();
+    ASSERT_EQ(trainer.gaussians().size(), before.size());  // no refinement moved the rows
+    const bool unchanged = trainer.gaussians().params.opacity_logits[0] == before.params.opacity_logits[0] &&
+                           trainer.gaussians().adam_m[int(ParamGroup::OpacityLogits)][0] ==
+                               before.adam_m[int(ParamGroup::OpacityLogits)][0];
+    EXPECT_EQ(unchanged, selective) << (selective ? "selective" : "dense");
+    size_t moved = 0;  // the Gaussians the view sees are updated either way
+    for (size_t i = 1; i < before.size(); ++i)
+      moved += trainer.gaussians().params.opacity_logits[i] != before.params.opacity_logits[i];
+    EXPECT_GT(moved, before.size() / 4);
+  }
+}
+
 }  // namespace
 }  // namespace desplat::test
 

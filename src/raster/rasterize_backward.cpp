@@ -64,13 +64,15 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
     // and the lanes are summed in a fixed order afterwards (deterministic).
     alignas(64) float acc[kEntrySlots][S] = {};
-    int r0, r1;
+    int r0, r1, h0, h1;
     box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
+    box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
+      for (int h = h0; h <= h1; ++h)
 #pragma omp simd
-      for (int col = 0; col < S; ++col) {
+      for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
         const int j = row + col;
         const float dx = mx - px_center[col];
         const float sigma = gaussian_sigma(a, b, c, dx, dy);
@@ -108,10 +110,11 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
         T[j] = hit > 0.0f ? t_before : T[j];
       }
     }
+    // Columns of halves not visited hold +0, and adding +0 changes no sum: they are left out.
     float* record = entry_grads + size_t(begin + k) * kEntrySlots;
     for (int q = 0; q < kEntrySlots; ++q) {
       record[q] = 0;
-      for (int col = 0; col < S; ++col) record[q] += acc[q][col];
+      for (int col = h0 * kHalfTile; col < (h1 + 1) * kHalfTile; ++col) record[q] += acc[q][col];
     }
   }
 }

@@ -180,14 +180,18 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     const float a = out.conics[3 * g], b = out.conics[3 * g + 1], c = out.conics[3 * g + 2];
     const float o = out.opacity[g], z = out.depths[g];
     const float cr = out.rgb[3 * g], cg = out.rgb[3 * g + 1], cb = out.rgb[3 * g + 2];
-    int r0, r1;
+    int r0, r1, h0, h1;
     box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
+    box_halves_in_tile(mx, out.blend_radii[2 * g], x0, cols, h0, h1);
+    if (h0 > h1) continue;
+    // Pixels that stopped at this entry, per lane; summed once per entry rather than per row.
+    alignas(32) int32_t finished[kHalfTile] = {};
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-      int finished = 0;
-#pragma omp simd reduction(+ : finished)
-      for (int col = 0; col < S; ++col) {
+      for (int h = h0; h <= h1; ++h)
+#pragma omp simd
+      for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
         const int j = row + col;
         const float dx = mx - px_center[col];
         const float sigma = gaussian_sigma(a, b, c, dx, dy);
@@ -208,11 +212,11 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
         T[j] = blend ? next_t : t;
         last[j] = blend ? k : last[j];
         active[j] = finish ? 0 : active[j];
-        finished += finish;
+        finished[col - h * kHalfTile] += finish;
       }
-      remaining -= finished;
     }
-    evaluated += int64_t(r1 - r0 + 1) * S;
+    for (int lane = 0; lane < kHalfTile; ++lane) remaining -= finished[lane];
+    evaluated += int64_t(std::max(0, r1 - r0 + 1)) * (h1 - h0 + 1) * kHalfTile;
   }
 
   for (int r = 0; r < rows; ++r)

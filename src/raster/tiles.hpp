@@ -38,6 +38,18 @@ inline void box_rows_in_tile(float my, int ry, int y0, int rows, int& r0, int& r
   r1 = std::min(rows - 1, static_cast<int>(std::ceil(my + ry - 0.5f)) - y0);
 }
 
+// The 8-column halves [h0, h1] of a tile starting at pixel column x0 (cols wide) that hold a
+// pixel center within rx of mx; h0 > h1 when none does. Same exactness argument as the
+// rows: a Gaussian contributes nothing outside its box, so the pixel loops skip a half
+// the box misses (one 8-lane AVX2 vector per row of a half).
+constexpr int kHalfTile = kTileSize / 2;
+inline void box_halves_in_tile(float mx, int rx, int x0, int cols, int& h0, int& h1) {
+  int c0, c1;
+  box_rows_in_tile(mx, rx, x0, cols, c0, c1);
+  h0 = c0 / kHalfTile;
+  h1 = c1 < c0 ? h0 - 1 : c1 / kHalfTile;
+}
+
 inline int thread_count(const RasterSettings& s) {
   return s.num_threads > 0 ? s.num_threads : omp_get_max_threads();
 }

@@ -109,6 +109,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"init.transient_points", &c.transient_points.action},
       {"init.transient_min_track_images", &c.transient_points.min_track_images},
       {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
+      {"selective_adam", &c.selective_adam},
       {"random_background", &c.random_background},
       {"eval_background", &c.eval_background},
       {"random_init_points", &c.random_init_points},

@@ -150,7 +150,7 @@ bool row_finite(const float* p, const float* m, const float* v, int width) {
 }  // namespace
 
 void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a,
-                                     int trained_color_floats) {
+                                     int trained_color_floats, std::span<const uint8_t> rows_to_update) {
   const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
   const double bc1 = bc.bc1;
   const float sqrt_bc2 = bc.sqrt_bc2;
@@ -166,9 +166,12 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
     if ((grads.*info.grads).size() != param(info.id).size())
       throw std::logic_error("adam_update: gradient size differs from parameters");
   }
-#pragma omp parallel for schedule(static) reduction(| : any_bad)
-  for (int64_t b = 0; b < blocks; ++b) {
-    const int64_t row0 = b * kBlock, rows = std::min(kBlock, n - row0);
+  const bool selective = !rows_to_update.empty();
+  if (selective && rows_to_update.size() != size_t(n))
+    throw std::logic_error("adam_update: the row selection has " + std::to_string(rows_to_update.size()) +
+                           " flags for " + std::to_string(n) + " Gaussians");
+  // Updates rows [row0, row0 + rows) of every group; returns whether a value went non-finite.
+  auto update_run = [&](int64_t row0, int64_t rows) {
     bool bad = false;
     for (int g = 0; g < kParamGroups; ++g) {
       const ParamGroupInfo& info = kParamGroupTable[g];
@@ -194,6 +197,24 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
         bad |= adam_span(p + o, m + o, v + o, grad + o, 3, step_size, sqrt_bc2, a);
         if (rest > 0) bad |= adam_span(p + o + 3, m + o + 3, v + o + 3, grad + o + 3, rest, rest_step, sqrt_bc2, a);
       }
+    }
+    return bad;
+  };
+#pragma omp parallel for schedule(static) reduction(| : any_bad)
+  for (int64_t b = 0; b < blocks; ++b) {
+    const int64_t block_end = std::min(n, (b + 1) * kBlock);
+    bool bad = false;
+    // Each maximal run of selected rows is one span (the whole block when nothing is
+    // selected): every value's arithmetic is the same either way.
+    for (int64_t row0 = b * kBlock; row0 < block_end;) {
+      if (selective && !rows_to_update[size_t(row0)]) {
+        ++row0;
+        continue;
+      }
+      int64_t run_end = row0 + 1;
+      while (run_end < block_end && (!selective || rows_to_update[size_t(run_end)])) ++run_end;
+      bad |= update_run(row0, run_end - row0);
+      row0 = run_end;
     }
     any_bad |= int(bad);
   }

@@ -205,6 +205,12 @@ void hide_ignored_centers(RasterOutput& fw, std::span<const float> keep) {
 
 }  // namespace
 
+// The rows Adam updates this step: the Gaussians the rasterizer found visible (the only ones
+// with a gradient), or every row (empty span) when selective Adam is off.
+std::span<const uint8_t> Trainer::adam_rows(const RasterOutput& forward) const {
+  return config_.selective_adam ? std::span<const uint8_t>(forward.visible) : std::span<const uint8_t>();
+}
+
 StepStats Trainer::step() {
   StepStats stats;
   stats.step = step_;
@@ -325,10 +331,13 @@ StepStats Trainer::step() {
   lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
   const double decay = double(lr.means) / double(config_.lr.means);
   profile.time(&StepTimings::optimizer, [&] {
+    // Adam first: the rows it updates are the rasterizer's visible ones, before the
+    // statistics hide those centred on ignored pixels (they still have a gradient).
+    const int sh_bands = rs.active_sh_degree + 1;
+    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands,
+                           adam_rows(static_pass_.forward));
     hide_ignored_centers(static_pass_.forward, keep);
     if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
-    const int sh_bands = rs.active_sh_degree + 1;
-    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands);
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                     static_cast<int>(data_.train.size()), rng_);
@@ -342,11 +351,11 @@ StepStats Trainer::step() {
   if (distractors || refine_distractors_now || (config_.distractors.enabled && view_seed_due[view])) {
     profile.time(&StepTimings::distractor, [&] {
       if (distractors) {
-        hide_ignored_centers(distractor_pass_.forward, keep);
-        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
         LearningRates dlr = config_.distractors.lr;
         dlr.means = float(dlr.means * decay);
-        distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{});
+        distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{}, -1, adam_rows(distractor_pass_.forward));
+        hide_ignored_centers(distractor_pass_.forward, keep);
+        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
         stats.nonfinite_pruned +=
             prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
       }

@@ -58,7 +58,8 @@ struct RasterOutput {
                                  // (the screen size density control reads)
   std::vector<float> depths;     // [N]    camera-space z
   std::vector<uint8_t> visible;  // [N]    1 if the Gaussian touches at least one tile
-  // Work done, for benchmarks: Gaussian–pixel pairs whose α was evaluated.
+  // Work done, for benchmarks: Gaussian–pixel pairs whose α was evaluated (the rows and
+  // 8-column halves of each tile that a Gaussian's blend box reaches).
   int64_t evaluated_pairs = 0;
 
   // --- saved for backward ---

@@ -89,8 +89,12 @@ struct TrainableGaussians {
   // (3·(d+1)² for active degree d; −1: all): the bands above the active degree have zero
   // gradient and zero moments, so Adam would leave them unchanged anyway. Afterwards
   // `nonfinite_groups` names the rows that went non-finite (see below).
+  // `rows` (empty: every row) selects the Gaussians to update, one flag per row: a row whose
+  // flag is 0 keeps its parameters and both moments exactly as they are, as if the step had
+  // not happened for it; the step count, and so the bias correction, advances for all
+  // (selective Adam, docs/METHOD.md §6).
   void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {},
-                   int trained_color_floats = -1);
+                   int trained_color_floats = -1, std::span<const uint8_t> rows = {});
   // After adam_update: empty when every updated value and moment is finite; otherwise [N],
   // bit g set when row i of group g holds a non-finite value or moment.
   std::vector<uint8_t> nonfinite_groups;
