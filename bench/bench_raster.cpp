@@ -7,7 +7,8 @@
 //   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
 //     the same camera: the workload of a late training step.
 // Counters: pairs = Gaussian–pixel pairs whose α was evaluated per call;
-// time_per_pair = wall time per evaluated pair.
+// time_per_pair = wall time per evaluated pair. Each runs once per pixel-loop path
+// (isa: 1 portable, 2 AVX2, 3 AVX-512; raster.hpp, KernelIsa), skipped where the CPU lacks it.
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Geometry>
@@ -17,6 +18,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <random>
+#include <string>
 
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/ply.hpp"
@@ -140,6 +142,11 @@ void run(benchmark::State& state, bool backward) {
   }
   RasterSettings settings;
   settings.num_threads = static_cast<int>(state.range(1));
+  settings.isa = static_cast<KernelIsa>(state.range(2));
+  if (!cpu_supports(settings.isa)) {
+    state.SkipWithError((std::string(kernel_isa_name(settings.isa)) + " is not supported by this CPU").c_str());
+    return;
+  }
   RasterOutput out;
   RasterGradients grads;
   const size_t pixels = size_t(scene.camera.width) * scene.camera.height;
@@ -162,11 +169,13 @@ void BM_Forward(benchmark::State& state) { run(state, false); }
 void BM_ForwardBackward(benchmark::State& state) { run(state, true); }
 
 // range(0): 100000 / 500000 random Gaussians, 0 = fox at initialization, 1 = a trained
-// fox (DESPLAT_BENCH_PLY); range(1): threads.
+// fox (DESPLAT_BENCH_PLY); range(1): threads; range(2): the KernelIsa path.
 void args(benchmark::internal::Benchmark* b) {
   for (int64_t scene : {100000, 500000, 0, 1})
-    for (int64_t threads : {1, 2}) b->Args({scene, threads});
-  b->ArgNames({"scene", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+    for (int64_t threads : {1, 2})
+      for (KernelIsa isa : {KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512})
+        b->Args({scene, threads, static_cast<int64_t>(isa)});
+  b->ArgNames({"scene", "threads", "isa"})->Unit(benchmark::kMillisecond)->UseRealTime();
 }
 
 // The machine's float FMA throughput, to read the kernels' ns per pair against: 16

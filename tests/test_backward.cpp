@@ -61,10 +61,13 @@ struct Case {
   float logit_max;  // high values exercise the 0.999 α clamp and early termination
 };
 
-class BackwardVsJet : public ::testing::TestWithParam<Case> {};
+// Every case runs once per pixel-loop path (raster.hpp, KernelIsa); a path this CPU cannot
+// run is skipped, and says so.
+class BackwardVsJet : public ::testing::TestWithParam<std::tuple<Case, KernelIsa>> {};
 
 TEST_P(BackwardVsJet, MatchesAutodiffReference) {
-  const Case c = GetParam();
+  const auto [c, isa] = GetParam();
+  if (!cpu_supports(isa)) GTEST_SKIP() << kernel_isa_name(isa) << " is not supported by this CPU";
   for (int seed = 0; seed < 3; ++seed) {
     std::mt19937 rng(77 + seed * 13 + c.count);
     const Camera cam = random_camera(rng, c.width, c.height, c.focal);
@@ -79,6 +82,7 @@ TEST_P(BackwardVsJet, MatchesAutodiffReference) {
     const GaussianSet g = random_gaussians(rng, spec);
     RasterSettings s;
     s.active_sh_degree = c.active_degree;
+    s.isa = isa;
     const Loss loss = random_loss(rng, cam);
     RasterOutput out;
     rasterize_forward(g.view(), cam, s, out);
@@ -91,10 +95,14 @@ TEST_P(BackwardVsJet, MatchesAutodiffReference) {
 
 INSTANTIATE_TEST_SUITE_P(
     RandomScenes, BackwardVsJet,
-    ::testing::Values(Case{20, 18, 6, 18, ColorMode::SphericalHarmonics, 3, 3, 2.0f},
-                      Case{33, 17, 8, 25, ColorMode::SphericalHarmonics, 3, 2, 2.0f},
-                      Case{24, 24, 10, 20, ColorMode::SphericalHarmonics, 1, 1, 9.0f},
-                      Case{19, 21, 7, 20, ColorMode::RGB, 0, -1, 4.0f}));
+    ::testing::Combine(::testing::Values(Case{20, 18, 6, 18, ColorMode::SphericalHarmonics, 3, 3, 2.0f},
+                                         Case{33, 17, 8, 25, ColorMode::SphericalHarmonics, 3, 2, 2.0f},
+                                         Case{24, 24, 10, 20, ColorMode::SphericalHarmonics, 1, 1, 9.0f},
+                                         Case{19, 21, 7, 20, ColorMode::RGB, 0, -1, 4.0f}),
+                       ::testing::Values(KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512)),
+    [](const auto& info) {
+      return "case" + std::to_string(info.index / 3) + "_" + kernel_isa_name(std::get<1>(info.param));
+    });
 
 // Only ∂L/∂depth, only ∂L/∂alpha: each output's backward path alone.
 TEST(Backward, EachOutputAlone) {

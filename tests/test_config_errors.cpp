@@ -49,6 +49,23 @@ TEST(ConfigErrors, UselessRatesAndSizes) {
   EXPECT_NO_THROW(config_from_json({{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
 }
 
+// The pixel-loop instruction set by name: unknown names and paths this CPU lacks are refused.
+TEST(ConfigErrors, KernelIsaMustBeAKnownPathThisCpuRuns) {
+  EXPECT_CONTAINS(error_for({{"kernel_isa", "sse9"}}),
+                  "config: kernel_isa must be auto, portable, avx2 or avx512 (got \"sse9\")");
+  EXPECT_CONTAINS(error_for({{"kernel_isa", 2}}), "config: kernel_isa must be auto, portable, avx2 or avx512 (got 2)");
+  EXPECT_EQ(config_from_json({{"kernel_isa", "portable"}}).kernel_isa, KernelIsa::Portable);
+  EXPECT_EQ(config_to_json(TrainConfig{})["kernel_isa"], "auto");
+  for (KernelIsa isa : {KernelIsa::Avx2, KernelIsa::Avx512}) {
+    const nlohmann::json j = {{"kernel_isa", kernel_isa_name(isa)}};
+    if (cpu_supports(isa))
+      EXPECT_EQ(config_from_json(j).kernel_isa, isa);
+    else
+      EXPECT_CONTAINS(error_for(j), std::string("config: kernel_isa ") + kernel_isa_name(isa) +
+                                        " is not supported by this CPU (or this build); use auto");
+  }
+}
+
 TEST(ConfigErrors, NonFiniteValuesAreRefusedWhateverTheSetting) {
   TrainConfig c;
   c.densify.grad_threshold = std::numeric_limits<float>::quiet_NaN();

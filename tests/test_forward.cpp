@@ -42,10 +42,13 @@ struct Case {
   int sh_degree, active_degree;
 };
 
-class ForwardVsReference : public ::testing::TestWithParam<Case> {};
+// Every case runs once per pixel-loop path (raster.hpp, KernelIsa); a path this CPU cannot
+// run is skipped, and says so.
+class ForwardVsReference : public ::testing::TestWithParam<std::tuple<Case, KernelIsa>> {};
 
 TEST_P(ForwardVsReference, MatchesBruteForce) {
-  const Case c = GetParam();
+  const auto [c, isa] = GetParam();
+  if (!cpu_supports(isa)) GTEST_SKIP() << kernel_isa_name(isa) << " is not supported by this CPU";
   for (int seed = 0; seed < 5; ++seed) {
     std::mt19937 rng(1000 * c.count + seed);
     const Camera cam = random_camera(rng, c.width, c.height, c.focal);
@@ -56,8 +59,10 @@ TEST_P(ForwardVsReference, MatchesBruteForce) {
     const GaussianSet g = random_gaussians(rng, spec);
     RasterSettings s;
     s.active_sh_degree = c.active_degree;
+    s.isa = isa;
     RasterOutput out;
     rasterize_forward(g.view(), cam, s, out);
+    EXPECT_EQ(out.isa, isa);
     const RefImage<double> ref = reference_render<double>(to_ref<double>(g), cam, s);
     const ImageError e = compare(out, ref);
     EXPECT_LT(e.color, kTolerance) << "seed " << seed;
@@ -73,11 +78,15 @@ TEST_P(ForwardVsReference, MatchesBruteForce) {
 
 INSTANTIATE_TEST_SUITE_P(
     RandomScenes, ForwardVsReference,
-    ::testing::Values(Case{64, 48, 60, 60, ColorMode::SphericalHarmonics, 3, 3},
-                      Case{37, 23, 40, 30, ColorMode::SphericalHarmonics, 3, 1},
-                      Case{50, 70, 300, 50, ColorMode::SphericalHarmonics, 2, 2},
-                      Case{33, 17, 80, 25, ColorMode::RGB, 0, -1},
-                      Case{96, 64, 500, 80, ColorMode::SphericalHarmonics, 0, 0}));
+    ::testing::Combine(::testing::Values(Case{64, 48, 60, 60, ColorMode::SphericalHarmonics, 3, 3},
+                                         Case{37, 23, 40, 30, ColorMode::SphericalHarmonics, 3, 1},
+                                         Case{50, 70, 300, 50, ColorMode::SphericalHarmonics, 2, 2},
+                                         Case{33, 17, 80, 25, ColorMode::RGB, 0, -1},
+                                         Case{96, 64, 500, 80, ColorMode::SphericalHarmonics, 0, 0}),
+                       ::testing::Values(KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512)),
+    [](const auto& info) {
+      return "case" + std::to_string(info.index / 3) + "_" + kernel_isa_name(std::get<1>(info.param));
+    });
 
 TEST(Forward, PerGaussianOutputsDescribeTheProjection) {
   std::mt19937 rng(7);

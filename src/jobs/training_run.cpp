@@ -530,7 +530,8 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                                                      {"pairs", median(pairs)},
                                                      {"ns_per_pair_forward", median(ns_forward)},
                                                      {"ns_per_pair_forward_backward", median(ns_forward_backward)},
-                                                     {"visible_share", median(visible_share)}};
+                                                     {"visible_share", median(visible_share)},
+                                                     {"kernel_isa", kernel_isa_name(resolve_kernel_isa(config.kernel_isa))}};
   model.write_metrics(metrics);
   const std::string scores =
       final_metrics.empty() ? std::string("no test views to score (the split left none)")

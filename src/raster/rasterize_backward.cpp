@@ -7,119 +7,12 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "raster/fast_exp.hpp"
 #include "raster/stage_math.hpp"
+#include "raster/tile_kernels.hpp"
 #include "raster/tiles.hpp"
 
 namespace desplat {
-namespace {
 using namespace raster;
-
-// Per (tile, Gaussian) entry, the gradient with respect to the Gaussian's 2D
-// quantities from that tile's pixels: kEntrySlots floats in this order.
-enum EntrySlot { kR, kG, kB, kZ, kO, kA, kB2, kC, kMx, kMy, kAbsX, kAbsY, kEntrySlots };
-
-void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                   const float* dA, const float* dD, float* entry_grads) {
-  constexpr int S = kTileSize;
-  const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
-  const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
-  // Per pixel: current transmittance (after the Gaussian being visited), the incoming
-  // gradients, the last blended index, and Q = T_final·∂L/∂A − Σ_behind w·(c·∂L/∂C + z·∂L/∂D),
-  // the part of ∂L/∂α that the Gaussians behind contribute (times 1/(1 − α), see below).
-  alignas(64) float T[S * S], Q[S * S];
-  alignas(64) float gr[S * S], gg[S * S], gb[S * S], gd[S * S];
-  alignas(64) int32_t last[S * S];
-  alignas(64) float px_center[S];
-  for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
-  int max_last = -1;
-  for (int r = 0; r < S; ++r)
-    for (int col = 0; col < S; ++col) {
-      const int j = r * S + col;
-      if (r < rows && col < cols) {
-        const int64_t p = int64_t(y0 + r) * fw.width + (x0 + col);
-        T[j] = fw.final_transmittance[p];
-        last[j] = fw.last_contributor[p];
-        gr[j] = dC ? dC[3 * p] : 0.0f;
-        gg[j] = dC ? dC[3 * p + 1] : 0.0f;
-        gb[j] = dC ? dC[3 * p + 2] : 0.0f;
-        gd[j] = dD ? dD[p] : 0.0f;
-        Q[j] = dA ? T[j] * dA[p] : 0.0f;
-      } else {
-        T[j] = 1, last[j] = -1;
-        gr[j] = gg[j] = gb[j] = gd[j] = Q[j] = 0;
-      }
-      max_last = std::max(max_last, last[j]);
-    }
-
-  const int begin = fw.tile_offsets[tile], end = fw.tile_offsets[tile + 1];
-  // Entries after the last blended one in every pixel get zero gradient.
-  std::fill(entry_grads + size_t(begin + max_last + 1) * kEntrySlots, entry_grads + size_t(end) * kEntrySlots, 0.0f);
-  for (int k = max_last; k >= 0; --k) {
-    const int32_t g = fw.tile_entries[begin + k];
-    const float mx = fw.means2d[2 * g], my = fw.means2d[2 * g + 1];
-    const float a = fw.conics[3 * g], b = fw.conics[3 * g + 1], c = fw.conics[3 * g + 2];
-    const float o = fw.opacity[g], z = fw.depths[g];
-    const float cr = fw.rgb[3 * g], cg = fw.rgb[3 * g + 1], cb = fw.rgb[3 * g + 2];
-    // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
-    // and the lanes are summed in a fixed order afterwards (deterministic).
-    alignas(64) float acc[kEntrySlots][S] = {};
-    int r0, r1, h0, h1;
-    box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
-    box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
-    for (int r = r0; r <= r1; ++r) {
-      const float dy = my - (y0 + r + 0.5f);
-      const int row = r * S;
-      for (int h = h0; h <= h1; ++h)
-#pragma omp simd
-      for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
-        const int j = row + col;
-        const float dx = mx - px_center[col];
-        const float sigma = gaussian_sigma(a, b, c, dx, dy);
-        const float vis = fast_exp_nonpositive(-sigma);
-        const float alpha = clamp_alpha(o * vis);
-        // Masks as 0/1 floats, built as chained selects: the body stays free of
-        // branches and GCC vectorizes it (a `&`-combined condition defeats it).
-        const float in_list = k <= last[j] ? 1.0f : 0.0f;
-        const float in_sigma = sigma >= 0.0f ? in_list : 0.0f;
-        const float hit = alpha >= kAlphaMin ? in_sigma : 0.0f;
-        const float ra = 1.0f / (1.0f - alpha);
-        const float t_before = T[j] * ra;  // transmittance in front of this Gaussian
-        const float w = hit * alpha * t_before;
-        // ∂C/∂α = c·T − (blended behind)/(1 − α) per channel, ∂A/∂α = T_final/(1 − α):
-        // ∂L/∂α = T·(c·∂L/∂C + z·∂L/∂D) + Q/(1 − α).
-        const float dot = cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j];
-        const float d_alpha = t_before * dot + ra * Q[j];
-        const float unclamped = o * vis <= kAlphaMax ? hit : 0.0f;
-        const float d_sigma = -unclamped * d_alpha * o * vis;
-        const float gmx = d_sigma * (a * dx + b * dy);
-        const float gmy = d_sigma * (b * dx + c * dy);
-        acc[kR][col] += w * gr[j];
-        acc[kG][col] += w * gg[j];
-        acc[kB][col] += w * gb[j];
-        acc[kZ][col] += w * gd[j];
-        acc[kO][col] += unclamped * d_alpha * vis;
-        acc[kA][col] += 0.5f * d_sigma * dx * dx;
-        acc[kB2][col] += d_sigma * dx * dy;
-        acc[kC][col] += 0.5f * d_sigma * dy * dy;
-        acc[kMx][col] += gmx;
-        acc[kMy][col] += gmy;
-        acc[kAbsX][col] += std::abs(gmx);
-        acc[kAbsY][col] += std::abs(gmy);
-        Q[j] -= w * dot;
-        T[j] = hit > 0.0f ? t_before : T[j];
-      }
-    }
-    // Columns of halves not visited hold +0, and adding +0 changes no sum: they are left out.
-    float* record = entry_grads + size_t(begin + k) * kEntrySlots;
-    for (int q = 0; q < kEntrySlots; ++q) {
-      record[q] = 0;
-      for (int col = h0 * kHalfTile; col < (h1 + 1) * kHalfTile; ++col) record[q] += acc[q][col];
-    }
-  }
-}
-
-}  // namespace
 
 void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
                         const RasterOutput& fw, std::span<const float> dL_dcolor,
@@ -155,9 +48,11 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   grads.entry_scratch.resize(fw.tile_entries.size() * kEntrySlots);
   float* entry_grads = grads.entry_scratch.data();
   const int threads = thread_count(s);
+  // The forward's path: it recomputes each α with the same bits (raster.hpp, KernelIsa).
+  const TileKernels& kernels = tile_kernels(fw.isa);
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
   for (int tile = 0; tile < grid.count(); ++tile)
-    backward_tile(grid, tile, fw, dL_dcolor.empty() ? nullptr : dL_dcolor.data(),
+    kernels.backward_tile(grid, tile, fw, dL_dcolor.empty() ? nullptr : dL_dcolor.data(),
                   dL_dalpha.empty() ? nullptr : dL_dalpha.data(),
                   dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads);
 

@@ -6,8 +6,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "raster/fast_exp.hpp"
 #include "raster/stage_math.hpp"
+#include "raster/tile_kernels.hpp"
 #include "raster/tiles.hpp"
 
 namespace desplat {
@@ -153,87 +153,6 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   }
 }
 
-// Front-to-back blending of one tile. Pixel state lives in 16×16 arrays; the inner
-// loop over the 16 pixels of a row is branch-free so it vectorizes.
-int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
-  constexpr int S = kTileSize;
-  const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
-  const int cols = std::min(S, out.width - x0), rows = std::min(S, out.height - y0);
-  alignas(64) float T[S * S], Cr[S * S], Cg[S * S], Cb[S * S], D[S * S];
-  alignas(64) int32_t active[S * S], last[S * S];
-  alignas(64) float px_center[S];
-  for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
-  int remaining = 0;
-  for (int r = 0; r < S; ++r)
-    for (int col = 0; col < S; ++col) {
-      const int j = r * S + col;
-      T[j] = 1, Cr[j] = Cg[j] = Cb[j] = D[j] = 0, last[j] = -1;
-      active[j] = (r < rows && col < cols);
-      remaining += active[j];
-    }
-
-  int64_t evaluated = 0;
-  const int begin = out.tile_offsets[tile], end = out.tile_offsets[tile + 1];
-  for (int k = 0; k < end - begin && remaining > 0; ++k) {
-    const int32_t g = out.tile_entries[begin + k];
-    const float mx = out.means2d[2 * g], my = out.means2d[2 * g + 1];
-    const float a = out.conics[3 * g], b = out.conics[3 * g + 1], c = out.conics[3 * g + 2];
-    const float o = out.opacity[g], z = out.depths[g];
-    const float cr = out.rgb[3 * g], cg = out.rgb[3 * g + 1], cb = out.rgb[3 * g + 2];
-    int r0, r1, h0, h1;
-    box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
-    box_halves_in_tile(mx, out.blend_radii[2 * g], x0, cols, h0, h1);
-    if (h0 > h1) continue;
-    // Pixels that stopped at this entry, per lane; summed once per entry rather than per row.
-    alignas(32) int32_t finished[kHalfTile] = {};
-    for (int r = r0; r <= r1; ++r) {
-      const float dy = my - (y0 + r + 0.5f);
-      const int row = r * S;
-      for (int h = h0; h <= h1; ++h)
-#pragma omp simd
-      for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
-        const int j = row + col;
-        const float dx = mx - px_center[col];
-        const float sigma = gaussian_sigma(a, b, c, dx, dy);
-        const float alpha = clamp_alpha(o * fast_exp_nonpositive(-sigma));
-        const float t = T[j];
-        const float next_t = t * (1.0f - alpha);
-        // 0/1 int32 masks, not bool: GCC (12) vectorizes for AVX2 only when every lane
-        // value is 32 bits wide and nothing is evaluated conditionally (no && chains).
-        const int32_t hit = active[j] & int32_t(sigma >= 0.0f) & int32_t(alpha >= kAlphaMin);
-        const int32_t finish = hit & int32_t(next_t <= kTransmittanceMin);  // not blended
-        const int32_t blend = hit & (finish ^ 1);
-        const float weight = alpha * t;
-        const float w = blend ? weight : 0.0f;
-        Cr[j] += w * cr;
-        Cg[j] += w * cg;
-        Cb[j] += w * cb;
-        D[j] += w * z;
-        T[j] = blend ? next_t : t;
-        last[j] = blend ? k : last[j];
-        active[j] = finish ? 0 : active[j];
-        finished[col - h * kHalfTile] += finish;
-      }
-    }
-    for (int lane = 0; lane < kHalfTile; ++lane) remaining -= finished[lane];
-    evaluated += int64_t(std::max(0, r1 - r0 + 1)) * (h1 - h0 + 1) * kHalfTile;
-  }
-
-  for (int r = 0; r < rows; ++r)
-    for (int col = 0; col < cols; ++col) {
-      const int j = r * S + col;
-      const int64_t p = int64_t(y0 + r) * out.width + (x0 + col);
-      out.color[3 * p] = Cr[j];
-      out.color[3 * p + 1] = Cg[j];
-      out.color[3 * p + 2] = Cb[j];
-      out.alpha[p] = 1.0f - T[j];
-      out.depth[p] = D[j];
-      out.final_transmittance[p] = T[j];
-      out.last_contributor[p] = last[j];
-    }
-  return evaluated;
-}
-
 }  // namespace
 
 void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSettings& s, RasterOutput& out) {
@@ -264,12 +183,14 @@ void rasterize_blend(const Camera& cam, const RasterSettings& s, RasterOutput& o
   out.depth.assign(pixels, 0.0f);
   out.final_transmittance.assign(pixels, 1.0f);
   out.last_contributor.assign(pixels, -1);
+  out.isa = resolve_kernel_isa(s.isa);
+  const TileKernels& kernels = tile_kernels(out.isa);
   const TileGrid grid(cam.width, cam.height);
   bin_gaussians(grid, thread_count(s), out);
 
   int64_t evaluated = 0;
 #pragma omp parallel for num_threads(thread_count(s)) schedule(dynamic, 1) reduction(+ : evaluated)
-  for (int tile = 0; tile < grid.count(); ++tile) evaluated += blend_tile(grid, tile, out);
+  for (int tile = 0; tile < grid.count(); ++tile) evaluated += kernels.blend_tile(grid, tile, out);
   out.evaluated_pairs = evaluated;
 }
 

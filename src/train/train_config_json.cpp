@@ -17,9 +17,18 @@ void from_json(const nlohmann::json& j, TransientPointAction& a) {
   a = transient_point_action_from_string(j.get<std::string>());
 }
 
+// The pixel loops' instruction set, by name (raster.hpp, KernelIsa).
+void to_json(nlohmann::json& j, const KernelIsa& isa) { j = kernel_isa_name(isa); }
+void from_json(const nlohmann::json& j, KernelIsa& isa) {
+  const auto parsed = j.is_string() ? parse_kernel_isa(j.get<std::string>()) : std::nullopt;
+  if (!parsed) throw std::invalid_argument("config: kernel_isa must be auto, portable, avx2 or avx512 (got " + j.dump() + ")");
+  isa = *parsed;
+}
+
 namespace {
 
-using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*>;
+using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*,
+                           KernelIsa*>;
 struct Entry {
   const char* name;
   Field field;
@@ -110,6 +119,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"init.transient_min_track_images", &c.transient_points.min_track_images},
       {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
       {"selective_adam", &c.selective_adam},
+      {"kernel_isa", &c.kernel_isa},
       {"random_background", &c.random_background},
       {"eval_background", &c.eval_background},
       {"random_init_points", &c.random_init_points},
@@ -188,6 +198,9 @@ void validate_config(const TrainConfig& c) {
   require("init.transient_min_track_images", c.transient_points.min_track_images, 0, kBig, false, "≥ 0");
   require("random_init_points", c.random_init_points, 1, 1e8, false, "1..100,000,000");
   require("threads", c.threads, 0, 4096, false, "0 (all cores) or a positive count");
+  if (!cpu_supports(c.kernel_isa))
+    throw std::invalid_argument(std::string("config: kernel_isa ") + kernel_isa_name(c.kernel_isa) +
+                                " is not supported by this CPU (or this build); use auto");
   // Rates: the means' rate decays on a log scale, so it and its final value must be > 0.
   require("lr.means", c.lr.means, 0, kBig, true, "> 0");
   require("means_lr_final", c.means_lr_final, 0, kBig, true, "> 0");

@@ -134,6 +134,7 @@ size_t Trainer::distractor_count() const {
 RasterSettings Trainer::raster_settings() const {
   RasterSettings rs;
   rs.num_threads = config_.threads;
+  rs.isa = config_.kernel_isa;
   rs.active_sh_degree = config_.sh_degree_at(step_);
   return rs;
 }

@@ -23,13 +23,40 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "desplat/core/camera.hpp"
 #include "desplat/core/gaussians.hpp"
 
 namespace desplat {
+
+// The instruction set the per-tile pixel loops (forward blending, backward per-pixel
+// gradients) are compiled for; the rest of the rasterizer is built once for the build's
+// target. Every path is compiled into the library and chosen at run time.
+//   Auto      the widest path this CPU supports (Avx512 > Avx2 > Portable);
+//   Portable  the build's baseline without AVX (with DESPLAT_NATIVE=OFF: SSE2 on x86-64),
+//             no fused multiply–adds: runs on any CPU the build targets;
+//   Avx2      8-lane AVX2 + FMA: a tile row is two vectors, one per 8-column half;
+//   Avx512    AVX-512 F/VL/BW/DQ: a row the Gaussian covers in both halves is one
+//             16-lane vector, a row it covers in one half an 8-lane one.
+// AVX2 and AVX-512 compute every α, transmittance and stopping decision bit-identically
+// (the falloff and exp spell out their fused multiply–adds) and agree in the blended sums
+// and gradients to float rounding (the compiler may fuse other products differently). The
+// portable path rounds those products separately, so it agrees with them to float rounding.
+// A forward and its backward always run the same path (RasterOutput::isa).
+enum class KernelIsa { Auto, Portable, Avx2, Avx512 };
+
+// Whether this CPU (and OS) can run `isa`'s path; Auto and Portable always can.
+bool cpu_supports(KernelIsa isa);
+// Auto → the widest supported path; any other value is returned as is when supported.
+// Throws std::invalid_argument naming the path when the CPU cannot run it.
+KernelIsa resolve_kernel_isa(KernelIsa isa);
+// "auto", "portable", "avx2", "avx512"; parse_kernel_isa is its inverse (nullopt otherwise).
+const char* kernel_isa_name(KernelIsa isa);
+std::optional<KernelIsa> parse_kernel_isa(std::string_view name);
 
 struct RasterSettings {
   float near_plane = 0.01f;  // cull p.z <= near  [world units along the optical axis]
@@ -38,6 +65,7 @@ struct RasterSettings {
   // SH degree used for this render (≤ the stored degree); -1 means "the stored one".
   int active_sh_degree = -1;
   int num_threads = 0;  // 0: OpenMP's default
+  KernelIsa isa = KernelIsa::Auto;  // the pixel loops' instruction set (above)
 };
 
 constexpr int kTileSize = 16;
@@ -74,6 +102,9 @@ struct RasterOutput {
   std::vector<int32_t> entry_of_gaussian; // [E] each Gaussian's entries, in tile order
   std::vector<float> final_transmittance; // [H, W]
   std::vector<int32_t> last_contributor;  // [H, W] index within the tile list, −1: none
+  // The pixel-loop path rasterize_blend ran (resolved, never Auto); the backward runs the
+  // same one, so it recomputes α bit-identically whatever its own settings say.
+  KernelIsa isa = KernelIsa::Portable;
 };
 
 struct RasterGradients {

@@ -75,6 +75,9 @@ struct TrainConfig {
   // default and the authors'): every Gaussian every step; selective measured 0.04–0.10 dB
   // lower on three scenes for a few percent of step time (docs/bench/issue16_speed.md).
   bool selective_adam = false;
+  // The rasterizer's pixel-loop instruction set (raster.hpp); auto: the widest this CPU has.
+  // The paths differ only in float rounding (docs/METHOD.md §3).
+  KernelIsa kernel_isa = KernelIsa::Auto;
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
   int random_init_points = 50000;  // used when the scene has no points
