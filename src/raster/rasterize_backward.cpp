@@ -53,8 +53,8 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
   for (int tile = 0; tile < grid.count(); ++tile)
     kernels.backward_tile(grid, tile, fw, dL_dcolor.empty() ? nullptr : dL_dcolor.data(),
-                  dL_dalpha.empty() ? nullptr : dL_dalpha.data(),
-                  dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads);
+                          dL_dalpha.empty() ? nullptr : dL_dalpha.data(),
+                          dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads);
 
   const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
   const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
