@@ -66,6 +66,14 @@ TEST(ConfigErrors, KernelIsaMustBeAKnownPathThisCpuRuns) {
   }
 }
 
+TEST(ConfigErrors, OwnedPixelPullSettingsAreCheckedAndRead) {
+  EXPECT_CONTAINS(error_for({{"distractors", {{"lambda_owned", -0.1}}}}), "distractors.lambda_owned must be ≥ 0");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"owned_after", -1}}}}), "distractors.owned_after must be ≥ 0");
+  const TrainConfig c = config_from_json({{"distractors", {{"lambda_owned", 0.5}, {"owned_after", 100}}}});
+  EXPECT_EQ(c.distractors.lambda_owned, 0.5f);
+  EXPECT_EQ(c.distractors.owned_after, 100);
+}
+
 TEST(ConfigErrors, NonFiniteValuesAreRefusedWhateverTheSetting) {
   TrainConfig c;
   c.densify.grad_threshold = std::numeric_limits<float>::quiet_NaN();

@@ -276,7 +276,7 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask);
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3, ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask);
   EXPECT_EQ(r.pixels, 3);
   EXPECT_EQ(r.static_unexplained, 2);
   // Pixel 0's composite is 0.75·0.5 = 0.375 (the distractor's black at α ¼): off by 0.145 → unexplained too.
@@ -286,6 +286,46 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   EXPECT_NEAR(d_alpha[0], 1 + 0.3f / 3, 1e-7);  // added only where static explains the pixel
   EXPECT_EQ(d_alpha[1], 1.0f);
   EXPECT_EQ(d_alpha[2], 1.0f);
+}
+
+// The owned-pixel pull: inside an area the static layer misses and the composite explains,
+// the distractor layer is the explanation, and A_d is pulled up; nowhere else.
+TEST(ViewResidual, PullsTheDistractorAlphaUpOnlyInsideAreasItAloneExplains) {
+  // A 5×4 image, black background, τ = 0.1. The static layer is 0.5 grey and opaque
+  // everywhere; the target is 0.5 except a 3×3 block (x 1–3, y 0–2) at 0.72, which the
+  // static layer misses by 0.22. The distractor covers the block at α 0.6 with premultiplied
+  // 0.5: 0.5 + 0.4·0.5 = 0.7, within τ. A block pixel is owned when its 8 neighbours inside
+  // the image are in the block too: (2, 0) (its row above is outside) and (2, 1), pixels 2
+  // and 7. The rest of the block touches pixels the static layer explains (its edge: fine
+  // detail looks like that); the 11 outer pixels get the explained-pixel penalty instead.
+  const int w = 5, h = 4, n = w * h;
+  std::vector<float> sc(3 * n, 0.5f), sa(n, 1.0f), dc(3 * n, 0.0f), da(n, 0.0f), target(3 * n, 0.5f);
+  for (int y = 0; y < 3; ++y)
+    for (int x = 1; x < 4; ++x) {
+      const int p = y * w + x;
+      da[p] = 0.6f;
+      for (int c = 0; c < 3; ++c) dc[3 * p + c] = 0.5f, target[3 * p + c] = 0.72f;
+    }
+  std::vector<float> composite(3 * n);
+  composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite);
+  ASSERT_NEAR(composite[3 * 7], 0.7f, 1e-6);
+  std::vector<float> d_alpha(n, 0.0f);
+  const ViewResidual r = measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, w,
+                                               ResidualPenalties{0.1f, 0.3f, 0.2f}, d_alpha);
+  EXPECT_EQ(r.static_unexplained, 9);
+  EXPECT_EQ(r.composite_unexplained, 0);
+  EXPECT_NEAR(r.penalty, 0.2 * 2 * (1 - 0.6) / n, 1e-7);  // A_d = 0 where the static layer explains
+  for (int p = 0; p < n; ++p) {
+    const bool in_block = p % w >= 1 && p % w <= 3 && p / w <= 2;
+    const float expected = p == 2 || p == 7 ? -0.2f / n : in_block ? 0.0f : 0.3f / n;
+    EXPECT_NEAR(d_alpha[p], expected, 1e-8) << "pixel " << p;
+  }
+  // The same residual on a 15×4 image would have other neighbours: the width is an input.
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] {
+                    measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3,
+                                          ResidualPenalties{0.1f, 0.3f, 0.2f}, d_alpha);
+                  }),
+                  "width");
 }
 
 // The same three pixels with pixel 2 (unexplained by both) ignored by the user's mask: it is in
@@ -300,7 +340,7 @@ TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
   std::vector<uint8_t> mask;
   const std::vector<float> keep = {1, 1, 0};
   const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 0.1f, 0.3f, d_alpha, &mask, keep);
+      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3, ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask, keep);
   EXPECT_EQ(r.pixels, 2);
   EXPECT_EQ(r.static_unexplained, 1);     // pixel 1 only
   EXPECT_EQ(r.composite_unexplained, 1);  // pixel 0 (see above)
@@ -414,6 +454,43 @@ TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
   }
 }
 
+// The owned-pixel pull in a trainer: view 0 alone shows a 24×24 square 50/255 brighter than
+// the scene, an area the static layer misses and the distractors come to explain. A partly
+// transparent distractor fits it (a white one would need α = 1); with the pull on, the
+// distractors over it end more opaque. Before `owned_after` the pull is off: training is bit
+// for bit the run without it.
+TEST(TrainerRules, TheOwnedPixelPullMakesAOneViewSquaresDistractorsOpaqueFromItsStepOn) {
+  TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
+  ByteImage& img = data.train[0].image;
+  for (int y = 12; y < 36; ++y)
+    for (int x = 20; x < 44; ++x)
+      for (int c = 0; c < 3; ++c) {
+        uint8_t& v = img.pixels[(size_t(y) * 64 + x) * 3 + c];
+        v = uint8_t(std::min(255, v + 50));
+      }
+  auto run = [&](float lambda_owned, int owned_after) {
+    TrainConfig c = seeding_test_config();
+    c.distractors.lambda_owned = lambda_owned;
+    c.distractors.owned_after = owned_after;
+    Trainer t(data, c);
+    for (int i = 0; i < 400; ++i) t.step();
+    return t;
+  };
+  const Trainer off = run(0.0f, 0), on = run(1.0f, 0), later = run(1.0f, 400);
+  auto square_alpha = [](const Trainer& t) {
+    const ViewLayers layers = t.render_layers(0, {0, 0, 0});
+    double sum = 0;
+    for (int y = 14; y < 34; ++y)
+      for (int x = 22; x < 42; ++x) sum += layers.distractor_alpha.pixels[size_t(y) * 64 + x];
+    return sum / (20 * 20);
+  };
+  const double a_off = square_alpha(off), a_on = square_alpha(on);
+  EXPECT_GT(a_on, a_off + 0.2) << a_on << " against " << a_off;
+  EXPECT_EQ(square_alpha(later), a_off);
+  EXPECT_EQ(later.distractors()[0].params.means, off.distractors()[0].params.means);
+  EXPECT_EQ(later.gaussians().params.means, off.gaussians().params.means);
+}
+
 TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
   // Two downscales every 3,000 steps, a 430-step refinement period (10 epochs of 43 views).
   TrainConfig c;
@@ -462,6 +539,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.pixels_per_distractor, 0);
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
   EXPECT_EQ(paper.distractors.lambda_mask_tv, 0.0f);
+  EXPECT_EQ(paper.distractors.lambda_owned, 0.0f);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
@@ -481,6 +559,8 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(def.distractors.reseed_starved_views);
   EXPECT_TRUE(def.distractors.seed_uncovered);
   EXPECT_EQ(def.distractors.grow_after, 0);
+  EXPECT_EQ(def.distractors.lambda_owned, 0.2f);  // round 4
+  EXPECT_EQ(def.distractors.owned_after, def.resolution_schedule);  // the first resolution switch
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);
   EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
@@ -510,6 +590,8 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   EXPECT_LT(reset_every, fast.densify.stop_split_at);
   // Positions decay over this run's length.
   EXPECT_EQ(fast.means_lr_decay_steps, fast.iterations);
+  // The owned-pixel pull starts at the first resolution switch, as in the default.
+  EXPECT_EQ(fast.distractors.owned_after, fast.resolution_schedule);
   // Every view's distractor buffer is refined at least 10 times while densifying with ~50 views.
   int refinements = 0;
   for (int64_t step = 0; step < fast.densify.stop_split_at; ++step)
@@ -528,6 +610,7 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   same.densify.stop_screen_size_at = def.densify.stop_screen_size_at;
   same.densify.reset_alpha_every = def.densify.reset_alpha_every;
   same.distractors.refine_every_epochs = def.distractors.refine_every_epochs;
+  same.distractors.owned_after = def.distractors.owned_after;
   EXPECT_EQ(config_to_json(same).dump(), config_to_json(def).dump());
 }
 

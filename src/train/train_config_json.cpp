@@ -88,10 +88,12 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.lambda_mask_tv", &c.distractors.lambda_mask_tv},
       {"distractors.explained_tolerance", &c.distractors.explained_tolerance},
       {"distractors.lambda_explained", &c.distractors.lambda_explained},
+      {"distractors.lambda_owned", &c.distractors.lambda_owned},
       {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
       {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
       {"distractors.grow_after", &c.distractors.grow_after},
+      {"distractors.owned_after", &c.distractors.owned_after},
       {"appearance.enabled", &c.appearance.enabled},
       {"appearance.image_dim", &c.appearance.image_dim},
       {"appearance.fourier_frequencies", &c.appearance.fourier_frequencies},
@@ -180,6 +182,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.refine_every_epochs", c.distractors.refine_every_epochs, 1, kBig, false, "at least 1");
   require("distractors.pixels_per_distractor", c.distractors.pixels_per_distractor, 0, kBig, false, "≥ 0");
   require("distractors.grow_after", c.distractors.grow_after, 0, kBig, false, "≥ 0");
+  require("distractors.owned_after", c.distractors.owned_after, 0, kBig, false, "≥ 0");
   require("appearance.image_dim", c.appearance.image_dim, 1, 4096, false, "1..4096");
   require("appearance.fourier_frequencies", c.appearance.fourier_frequencies, 1, 16, false, "1..16");
   require("appearance.hidden_width", c.appearance.hidden_width, 1, 4096, false, "1..4096");
@@ -233,6 +236,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.lambda_mask_tv", c.distractors.lambda_mask_tv, 0, kBig, false, "≥ 0");
   require("distractors.explained_tolerance", c.distractors.explained_tolerance, 0, kBig, true, "> 0");
   require("distractors.lambda_explained", c.distractors.lambda_explained, 0, kBig, false, "≥ 0");
+  require("distractors.lambda_owned", c.distractors.lambda_owned, 0, kBig, false, "≥ 0");
   require("init.transient_color_tolerance", c.transient_points.color_tolerance, 0, kBig, false, "≥ 0");
   require("random_init_extent", c.random_init_extent, 0, kBig, true, "> 0");
   for (const float b : c.eval_background) require("eval_background", b, 0, 1, false, "three values in [0, 1]");

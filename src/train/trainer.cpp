@@ -288,7 +288,9 @@ StepStats Trainer::step() {
     if (config_.distractors.enabled) {
       const DistractorSettings& ds = config_.distractors;
       const ViewResidual residual = measure_view_residual(
-          statics, distractor, composite_, target.pixels, bg, ds.explained_tolerance, ds.lambda_explained,
+          statics, distractor, composite_, target.pixels, bg, cam.width,
+          ResidualPenalties{ds.explained_tolerance, ds.lambda_explained,
+                            step_ >= ds.owned_after ? ds.lambda_owned : 0.0f},
           distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr, keep);
       stats.loss += residual.penalty;
       view_static_unexplained[view] = float(residual.static_fraction());

@@ -7,26 +7,48 @@
 
 namespace desplat {
 
+namespace {
+enum PixelClass : uint8_t { kIgnored = 1, kStaticExplains = 2, kCompositeExplains = 4 };
+
+// An unexplained pixel whose 8 neighbours inside the image are unexplained too: the inside
+// of an area the static layer misses, as a transient object is (erode_mask's rule). Fine
+// detail the static layer has not fitted yet is thin: edges and texture.
+bool inside_static_miss(const std::vector<uint8_t>& cls, int width, int height, int x, int y) {
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int nx = x + dx, ny = y + dy;
+      if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+      if (cls[size_t(ny) * width + nx] & (kIgnored | kStaticExplains)) return false;
+    }
+  return true;
+}
+}  // namespace
+
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
-                                   std::span<const float> target, const Background& bg, float tolerance,
-                                   float lambda_explained, std::span<float> d_distractor_alpha,
+                                   std::span<const float> target, const Background& bg, int width,
+                                   const ResidualPenalties& penalties, std::span<float> d_distractor_alpha,
                                    std::vector<uint8_t>* mask, std::span<const float> keep) {
   const size_t pixels = statics.alpha.size();
   if (!keep.empty() && keep.size() != pixels) throw std::invalid_argument("measure_view_residual: mask size differs");
   if (statics.color.size() != 3 * pixels || composite.size() != 3 * pixels || target.size() != 3 * pixels)
     throw std::invalid_argument("measure_view_residual: image sizes differ");
+  if (width <= 0 || pixels % size_t(width) != 0)
+    throw std::invalid_argument("measure_view_residual: width does not divide the pixel count");
+  const int height = int(pixels / size_t(width));
   const bool has_distractor = !distractor.alpha.empty();
-  const bool penalize = lambda_explained > 0 && has_distractor;
+  const float tolerance = penalties.tolerance;
+  const bool penalize = (penalties.lambda_explained > 0 || penalties.lambda_owned > 0) && has_distractor;
   if (penalize && (distractor.alpha.size() != pixels || d_distractor_alpha.size() != pixels))
     throw std::invalid_argument("measure_view_residual: distractor layer size differs");
   if (mask) mask->resize(pixels);  // every pixel is written below
+  thread_local std::vector<uint8_t> cls;  // reused from step to step: no per-step allocation
+  cls.resize(pixels);
   ViewResidual r;
   r.pixels = int64_t(pixels);
   if (!keep.empty()) r.pixels = std::count_if(keep.begin(), keep.end(), [](float k) { return k > 0; });
-  const float weight = penalize && r.pixels > 0 ? lambda_explained / float(r.pixels) : 0.0f;
-  double penalty_sum = 0;
   for (size_t p = 0; p < pixels; ++p) {
     if (!keep.empty() && keep[p] == 0) {  // ignored by the user: neither explained nor not
+      cls[p] = kIgnored;
       if (mask) (*mask)[p] = 0;
       continue;
     }
@@ -43,12 +65,26 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     const bool composite_explains = composite_err < 3.0f * tolerance;
     r.composite_unexplained += !composite_explains;
     if (mask) (*mask)[p] = !static_explains && !composite_explains;
-    if (penalize && static_explains) {
-      penalty_sum += distractor.alpha[p];
-      d_distractor_alpha[p] += weight;
-    }
+    cls[p] = uint8_t((static_explains ? kStaticExplains : 0) | (composite_explains ? kCompositeExplains : 0));
   }
-  r.penalty = penalize && r.pixels > 0 ? double(lambda_explained) * penalty_sum / double(r.pixels) : 0.0;
+  if (!penalize || r.pixels == 0) return r;
+  const float explained_weight = penalties.lambda_explained / float(r.pixels);
+  const float owned_weight = penalties.lambda_owned / float(r.pixels);
+  double explained_sum = 0, owned_sum = 0;
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const size_t p = size_t(y) * width + x;
+      if (cls[p] & kIgnored) continue;
+      if (cls[p] & kStaticExplains) {  // a distractor here can only be memorizing static detail
+        explained_sum += distractor.alpha[p];
+        d_distractor_alpha[p] += explained_weight;
+      } else if (owned_weight > 0 && (cls[p] & kCompositeExplains) && inside_static_miss(cls, width, height, x, y)) {
+        owned_sum += 1.0f - distractor.alpha[p];  // the distractor layer is this pixel's explanation
+        d_distractor_alpha[p] -= owned_weight;
+      }
+    }
+  r.penalty = (double(penalties.lambda_explained) * explained_sum + double(penalties.lambda_owned) * owned_sum) /
+              double(r.pixels);
   return r;
 }
 

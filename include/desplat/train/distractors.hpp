@@ -48,6 +48,13 @@ struct DistractorSettings {
   // Weight of mean(A_d · [the static layer alone explains the pixel]): a distractor over a
   // pixel the static scene already explains can only be memorizing static detail.
   float lambda_explained = 0.05f;
+  // Weight of mean((1 − A_d) · owned), owned = the static layer misses the pixel and its 8
+  // neighbours, the composite explains it: there the distractor layer is the explanation, and
+  // a transient object is opaque. Without it A_d stops at the least alpha that fits the colour
+  // and masks stay partial (docs/METHOD.md §7). From step owned_after on: the static layer
+  // first gets its chance at what few views see (measured in docs/bench/issue17_ab.md, round 4).
+  float lambda_owned = 0.2f;
+  int owned_after = 3000;
   // Growth cap: a refinement grows a view's buffer to at most (pixels the static layer left
   // unexplained in the view's latest step, counted at full training resolution) /
   // pixels_per_distractor, the highest gradients first. 0: unlimited.
