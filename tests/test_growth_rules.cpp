@@ -540,6 +540,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
   EXPECT_EQ(paper.distractors.lambda_mask_tv, 0.0f);
   EXPECT_EQ(paper.distractors.lambda_owned, 0.0f);
+  EXPECT_EQ(paper.distractors.refine_every_epochs, 10);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
@@ -561,6 +562,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.grow_after, 0);
   EXPECT_EQ(def.distractors.lambda_owned, 0.2f);  // round 4
   EXPECT_EQ(def.distractors.owned_after, def.resolution_schedule);  // the first resolution switch
+  EXPECT_EQ(def.distractors.refine_every_epochs, 3);  // round 4
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);
   EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
@@ -609,7 +611,6 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   same.densify.stop_split_at = def.densify.stop_split_at;
   same.densify.stop_screen_size_at = def.densify.stop_screen_size_at;
   same.densify.reset_alpha_every = def.densify.reset_alpha_every;
-  same.distractors.refine_every_epochs = def.distractors.refine_every_epochs;
   same.distractors.owned_after = def.distractors.owned_after;
   EXPECT_EQ(config_to_json(same).dump(), config_to_json(def).dump());
 }

@@ -21,7 +21,6 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stop_split_at = 2500;        // the last 500 steps settle what densification added
     c.densify.stop_screen_size_at = 1000;  // the coarse third only, as the default's 4,000 ends early
     c.densify.reset_alpha_every = 10;      // opacity resets at steps 1,000 and 2,000 (30 would never fire)
-    c.distractors.refine_every_epochs = 3;  // at 10, each buffer would be refined only ~5 times in the run
     c.distractors.owned_after = 1000;       // after the coarse third, as the default after its first level
     return c;
   }
@@ -34,6 +33,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view
     c.distractors.lambda_explained = 0.0f;
     c.distractors.lambda_owned = 0.0f;
+    c.distractors.refine_every_epochs = 10;
     c.distractors.lambda_mask_tv = 0.0f;
     c.distractors.pixels_per_distractor = 0;
     c.distractors.reseed_starved_views = false;

@@ -30,7 +30,10 @@ struct DistractorSettings {
   // means' rate decays with the same schedule as the static means'.
   LearningRates lr{1.6e-4f, 5e-2f, 1e-2f, 5e-2f, 2.5e-2f, 0.0f};
   bool density_control = true;  // per-view split/duplicate/cull (§7); false: never refined
-  int refine_every_epochs = 10; // refine every view each time all views were seen this many more times
+  // Refine every view each time all views were seen this many more times. 3 measured best
+  // (docs/bench/issue17_ab.md, round 4): at the authors' 10 (--preset paper) a buffer first
+  // grows after 10 visits, while the static layer takes on the occluders' colours.
+  int refine_every_epochs = 3;
   bool regularize = true;       // the two opacity regularizers of §4
   float lambda_static = 0.01f;  // weight of mean(1 − A_s)
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
