@@ -85,22 +85,30 @@ TEST(Distractors, DefaultCountKeepsThePapersDensityOnTheImage) {
   EXPECT_THROW(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), std::invalid_argument);
 }
 
-TEST(Distractors, RefinementScheduleIsEveryTenEpochsUntilTheEnd) {
+TEST(Distractors, RefinementScheduleIsEveryFewEpochsUntilTheEnd) {
+  // The default's 3 epochs and the authors' 10 (--preset paper), 43 views: periods of 129 and
+  // 430 steps, refined at the first multiple of 100 in each window.
   DensifySettings d;
-  DistractorSettings s;
-  const int views = 43;  // period 430 steps: refined at the first multiple of 100 in each window
-  std::vector<int64_t> due;
-  for (int64_t step = 0; step < 20000; ++step)
-    if (distractor_refine_due(step, views, d, s)) due.push_back(step);
-  std::vector<int64_t> want;
-  for (int64_t step = d.warmup + 1; step < 20000; ++step)
-    if (step % 100 == 0 && step % 430 < 100) want.push_back(step);
-  EXPECT_EQ(due, want);
-  ASSERT_GE(due.size(), 2u);
-  EXPECT_EQ(due[0], 900);  // 860 is not a multiple of 100; 900 % 430 = 40
-  EXPECT_TRUE(distractor_refine_due(19800, views, d, s));  // culling continues after 15,000
-  s.density_control = false;
-  EXPECT_FALSE(distractor_refine_due(900, views, d, s));
+  const int views = 43;
+  for (const int epochs : {3, 10}) {
+    DistractorSettings s;
+    s.refine_every_epochs = epochs;
+    const int64_t period = int64_t(epochs) * views;
+    std::vector<int64_t> due;
+    for (int64_t step = 0; step < 20000; ++step)
+      if (distractor_refine_due(step, views, d, s)) due.push_back(step);
+    std::vector<int64_t> want;
+    for (int64_t step = d.warmup + 1; step < 20000; ++step)
+      if (step % 100 == 0 && step % period < 100) want.push_back(step);
+    EXPECT_EQ(due, want) << epochs << " epochs";
+    ASSERT_GE(due.size(), 2u);
+    // 10 epochs: 860 is not a multiple of 100, 900 % 430 = 40. 3 epochs: 600 % 129 = 84.
+    EXPECT_EQ(due[0], epochs == 10 ? 900 : 600);
+    EXPECT_TRUE(distractor_refine_due(19800, views, d, s));  // culling continues after 15,000
+    s.density_control = false;
+    EXPECT_FALSE(distractor_refine_due(due[0], views, d, s));
+  }
+  EXPECT_EQ(DistractorSettings{}.refine_every_epochs, 3);
 }
 
 // Four distractors with hand-set statistics: seen and sharp (kept), never seen (culled),
@@ -193,6 +201,7 @@ TEST(DistractorTraining, AnEmptiedViewCostsNothing) {
   // A refinement hands an emptied view's memory back.
   TrainConfig c = desplat_config(600);
   c.distractors.reseed_starved_views = false;  // a starved view would be re-seeded, and cost again
+  c.distractors.seed_uncovered = false;        // so would a view whose residual is uncovered
   c.distractors.initial_count = 30;
   c.distractors.init_opacity = 0.01f;  // all below the cull threshold: the first refinement empties every view
   Trainer t2(data, c);

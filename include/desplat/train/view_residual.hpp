@@ -33,9 +33,10 @@ struct ResidualPenalties {
 // With a distractor layer, ADDS the penalties' gradients to d_distractor_alpha [P]:
 // λ_e/P where the static layer explains the pixel ("explained"), −λ_o/P where the static
 // layer does not, nor at any of the 8 neighbours, and the composite does ("owned" by the
-// distractor layer: the inside of an area only it explains). `width` is the image's, in pixels. `uncovered_mask`, when not null, is
-// resized to [P] and set to 1 where neither the static layer nor the composite explains the
-// pixel: what no Gaussian of either layer accounts for yet. `keep` ([P], 0 or 1, optional):
+// distractor layer: the inside of an area only it explains). `width` is the image's, in
+// pixels. `uncovered_mask`, when not null, is resized to [P] and set to 1 where neither the
+// static layer nor the composite explains the pixel: what no Gaussian of either layer
+// accounts for yet. `keep` ([P], 0 or 1, optional):
 // the user's mask; an ignored pixel is in no count (`pixels` counts the kept ones), gets no
 // penalty and is never uncovered.
 ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<const float> composite,
