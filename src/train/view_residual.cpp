@@ -10,15 +10,16 @@ namespace desplat {
 namespace {
 enum PixelClass : uint8_t { kIgnored = 1, kStaticExplains = 2, kCompositeExplains = 4 };
 
-// An unexplained pixel whose 8 neighbours inside the image are unexplained too: the inside
-// of an area the static layer misses, as a transient object is (erode_mask's rule). Fine
-// detail the static layer has not fitted yet is thin: edges and texture.
-bool inside_static_miss(const std::vector<uint8_t>& cls, int width, int height, int x, int y) {
+// Whether `set(p)` holds for pixel (x, y) and its 8 neighbours inside the image: the inside
+// of an area, as a transient object covers one. The one 3×3 rule of erode_mask and the
+// owned-pixel pull.
+template <class Set>
+bool interior_of(int width, int height, int x, int y, Set set) {
   for (int dy = -1; dy <= 1; ++dy)
     for (int dx = -1; dx <= 1; ++dx) {
       const int nx = x + dx, ny = y + dy;
       if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
-      if (cls[size_t(ny) * width + nx] & (kIgnored | kStaticExplains)) return false;
+      if (!set(size_t(ny) * width + nx)) return false;
     }
   return true;
 }
@@ -78,7 +79,9 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
       if (cls[p] & kStaticExplains) {  // a distractor here can only be memorizing static detail
         explained_sum += distractor.alpha[p];
         d_distractor_alpha[p] += explained_weight;
-      } else if (owned_weight > 0 && (cls[p] & kCompositeExplains) && inside_static_miss(cls, width, height, x, y)) {
+      } else if (owned_weight > 0 && (cls[p] & kCompositeExplains) &&
+                 interior_of(width, height, x, y, [&](size_t q) { return !(cls[q] & (kIgnored | kStaticExplains)); })) {
+        // Inside an area the static layer misses; its fine detail not yet fitted is thin.
         owned_sum += 1.0f - distractor.alpha[p];  // the distractor layer is this pixel's explanation
         d_distractor_alpha[p] -= owned_weight;
       }
@@ -93,15 +96,8 @@ void erode_mask(std::vector<uint8_t>& mask, int width, int height) {
     throw std::invalid_argument("erode_mask: mask size does not match the image");
   const std::vector<uint8_t> in = mask;
   for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      uint8_t keep = in[size_t(y) * width + x];
-      for (int dy = -1; dy <= 1 && keep; ++dy)
-        for (int dx = -1; dx <= 1 && keep; ++dx) {
-          const int nx = x + dx, ny = y + dy;
-          if (nx >= 0 && ny >= 0 && nx < width && ny < height && !in[size_t(ny) * width + nx]) keep = 0;
-        }
-      mask[size_t(y) * width + x] = keep;
-    }
+    for (int x = 0; x < width; ++x)
+      mask[size_t(y) * width + x] = interior_of(width, height, x, y, [&](size_t q) { return in[q] != 0; });
 }
 
 }  // namespace desplat
