@@ -97,6 +97,14 @@ TEST(Golden, KernelRenders) {
   if (updating()) save_golden();
 }
 
+// The portable build (DESPLAT_NATIVE=OFF) compiles everything but the pixel loops for baseline
+// x86-64, without fused multiply-adds; over 200 steps that rounding moves test PSNR by ~0.2 dB
+// (measured 2026-11-26), so it has its own training goldens. Kernel renders are shared: the
+// pixel loops pick their instruction set at run time in both builds.
+std::string training_key(const std::string& name) {
+  return std::string(DESPLAT_GOLDEN_BUILD) == "portable" ? "portable_" + name : name;
+}
+
 TEST(Golden, ShortTrainingRun) {
   const TrainingData data = synthetic_training_data(16, 64, 48, 11);
   TrainConfig c;
@@ -114,10 +122,10 @@ TEST(Golden, ShortTrainingRun) {
   for (int i = 0; i < 200; ++i) trainer.step();
   double psnr = 0, ssim = 0;
   for (const auto& m : trainer.evaluate(data.test)) psnr += m.psnr / data.test.size(), ssim += m.ssim / data.test.size();
-  check_value("train_200_test_psnr", psnr, kPsnrTolerance);
-  check_value("train_200_test_ssim", ssim, kSsimTolerance);
-  check_value("train_200_gaussians", double(trainer.gaussians().size()), 0.02 * trainer.gaussians().size());
-  check_thumbnail("train_200_render_test0", thumbnail(trainer.render(data.test[0].camera, c.eval_background)),
+  check_value(training_key("train_200_test_psnr"), psnr, kPsnrTolerance);
+  check_value(training_key("train_200_test_ssim"), ssim, kSsimTolerance);
+  check_value(training_key("train_200_gaussians"), double(trainer.gaussians().size()), 0.02 * trainer.gaussians().size());
+  check_thumbnail(training_key("train_200_render_test0"), thumbnail(trainer.render(data.test[0].camera, c.eval_background)),
                   kThumbTrainTolerance);
   if (updating()) save_golden();
 }

@@ -425,7 +425,7 @@ TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
     Trainer t(data, c);
     int64_t reseeded = 0;
     for (int i = 0; i < 400 && reseeded == 0; ++i) {
-      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
       reseeded = t.step().reseeded;
     }
     ASSERT_GT(reseeded, 0) << "starved rule " << starved_rule;
@@ -514,7 +514,7 @@ TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
     Trainer t(data, seeding_test_config(downscales));
     int64_t seeded_at = -1;
     for (int i = 0; i < 400 && seeded_at < 0; ++i) {
-      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
       if (t.step().reseeded > 0) seeded_at = i;
     }
     if (downscales == 0) {

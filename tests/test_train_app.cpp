@@ -230,14 +230,14 @@ TEST_F(TrainApp, ReportOpensInHeadlessChromiumWithEveryImageAndPlot) {
   std::set<uint32_t> colours;
   size_t coloured = 0;  // pixels that are not grey: plot lines, rendered images
   for (size_t p = 0; p < page.pixels.size() / 3; ++p) {
-    uint32_t key = 0;
+    uint32_t rgb24 = 0;
     float lo = 1, hi = 0;
     for (int c = 0; c < 3; ++c) {
       const float v = page.pixels[3 * p + c];
-      key = key << 8 | uint32_t(std::lround(v * 255));
+      rgb24 = rgb24 << 8 | uint32_t(std::lround(v * 255));
       lo = std::min(lo, v), hi = std::max(hi, v);
     }
-    colours.insert(key);
+    colours.insert(rgb24);
     coloured += hi - lo > 0.15f;
   }
   std::printf("[   info   ] screenshot: %zu colours, %zu coloured pixels\n", colours.size(), coloured);

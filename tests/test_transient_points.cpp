@@ -8,6 +8,7 @@
 #include <set>
 
 #include "desplat/io/colmap.hpp"
+#include "desplat/train/effects.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/train/trainer.hpp"
 #include "desplat/train/transient_points.hpp"
@@ -65,6 +66,60 @@ TEST(TransientPoints, ShortTracksAndDisagreeingColours) {
   bad_view.point_train_views[0] = {7};
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { transient_points(bad_view, {}); }),
                   "does not exist");
+}
+
+// Two photos of one grey wall taken two stops apart: 0.225 and 0.9 everywhere. Each of 40
+// points (one per pixel of the top five rows) has COLMAP's mean colour 143/255 = 0.561, which
+// differs from both photos by more than 0.25 (0.337 and 0.341): compared as stored, every point
+// disagrees. Each view's gain (the median photo / point ratio over its 40 samples: 57/143 and
+// 230/143) maps 0.561 onto the photo exactly, so after it no point disagrees, except point 40,
+// on the bottom-right pixel, which view 1 shows dark (0.2 where 0.9 is expected): a transient.
+TEST(TransientPoints, ColoursAreComparedAfterEachViewsExposure) {
+  auto wall = [](float grey) {
+    TrainView v;
+    v.name = "wall";
+    v.camera.width = v.camera.height = 8;
+    v.camera.fx = v.camera.fy = 8;
+    v.camera.cx = v.camera.cy = 4;
+    v.image = to_bytes(FloatImage{8, 8, 3, std::vector<float>(192, grey)});
+    return v;
+  };
+  TrainingData d;
+  d.train = {wall(0.225f), wall(0.9f)};
+  for (int c = 0; c < 3; ++c) d.train[1].image.pixels[3 * 63 + c] = 51;  // 0.2 at pixel (7, 7)
+  auto point_at = [](int u, int v) { return std::array<float, 3>{(u + 0.5f - 4) / 8, (v + 0.5f - 4) / 8, 1}; };
+  for (int v = 0; v < 5; ++v)
+    for (int u = 0; u < 8; ++u) d.points.push_back(point_at(u, v));
+  d.points.push_back(point_at(7, 7));
+  const size_t n = d.points.size();
+  d.colors.assign(n, {143, 143, 143});
+  d.point_track_images.assign(n, 5);
+  d.point_train_views.assign(n, {0, 1});
+  ASSERT_EQ(d.train[0].camera.pixel_of(d.points[40]), 63);
+
+  const std::vector<std::array<float, 3>> gains = view_gains(d);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(gains[0][c], 57.0 / 143.0, 1e-5);
+    EXPECT_NEAR(gains[1][c], 230.0 / 143.0, 1e-5);
+  }
+  std::vector<uint8_t> only_the_dark_pixel(n, 0);
+  only_the_dark_pixel[40] = 1;
+  TransientPointSettings s;
+  EXPECT_EQ(transient_points(d, s), only_the_dark_pixel);
+  s.per_view_gain = false;
+  EXPECT_EQ(transient_points(d, s), std::vector<uint8_t>(n, 1));
+  s.per_view_gain = true;
+  EXPECT_EQ(config_from_json(nlohmann::json{{"init", {{"transient_per_view_gain", false}}}}).transient_points.per_view_gain,
+            false);
+
+  // Fewer than 30 samples per channel: no evidence of a gain, the colour is compared as stored.
+  TrainingData few = d;
+  few.points.resize(20);
+  few.colors.resize(20);
+  few.point_track_images.resize(20);
+  few.point_train_views.resize(20);
+  EXPECT_EQ(view_gains(few), (std::vector<std::array<float, 3>>(2, {1.0f, 1.0f, 1.0f})));
+  EXPECT_EQ(transient_points(few, s), std::vector<uint8_t>(20, 1));
 }
 
 TEST(TransientPoints, ConfigNamesTheActionAndRejectsOthers) {

@@ -124,7 +124,7 @@ float open_top_share(const TrainView& view, const std::vector<long long>& sample
     const int c = stack.back();
     stack.pop_back();
     const int x = c % cw, y = c / cw;
-    for (const auto [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+    for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
       const int nx = x + dx, ny = y + dy;
       if (nx < 0 || ny < 0 || nx >= cw || ny >= ch) continue;
       const int n = ny * cw + nx;
@@ -184,6 +184,7 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
       judged &= ratios[v][c].size() >= size_t(r.min_samples_per_view);
       e.log2_gain[c] = float(median(ratios[v][c]));
     }
+    e.gain_judged = judged;
     if (judged) {
       const double mean_gain = (e.log2_gain[0] + e.log2_gain[1] + e.log2_gain[2]) / 3.0;
       brightness.push_back(mean_gain);
@@ -218,6 +219,15 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
               ") and the colour balance by " + fixed2(ev.white_balance_spread) + " (threshold " +
               fixed2(r.white_balance_spread) + ")";
   return ev;
+}
+
+std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules) {
+  const EffectsEvidence ev = examine_effects(data, rules);
+  std::vector<std::array<float, 3>> gains(data.train.size(), {1.0f, 1.0f, 1.0f});
+  for (size_t v = 0; v < ev.views.size(); ++v)
+    if (ev.views[v].gain_judged)
+      for (int c = 0; c < 3; ++c) gains[v][c] = std::exp2(ev.views[v].log2_gain[c]);
+  return gains;
 }
 
 Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why) {

@@ -120,6 +120,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"init.transient_points", &c.transient_points.action},
       {"init.transient_min_track_images", &c.transient_points.min_track_images},
       {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
+      {"init.transient_per_view_gain", &c.transient_points.per_view_gain},
       {"selective_adam", &c.selective_adam},
       {"kernel_isa", &c.kernel_isa},
       {"random_background", &c.random_background},

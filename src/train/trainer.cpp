@@ -387,7 +387,11 @@ void Trainer::refine_all_distractors(int image_size, StepStats& stats) {
       stats.distractor_refine += r.report;
       stats.distractor_refinements.push_back(r);
       // An emptied view gives its memory back; it is not rendered until it is re-seeded.
-      if (d.size() == 0) d = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0});
+      if (d.size() == 0) {
+        GaussianSet empty;
+        empty.color_mode = ColorMode::RGB;
+        d = TrainableGaussians(std::move(empty));
+      }
     }
     const bool starved = ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
     const bool uncovered = ds.seed_uncovered && uncovered_seed_count(d.size(), view_static_unexplained[v],

@@ -56,6 +56,7 @@ struct ViewEvidence {
   int samples = 0;
   std::array<float, 3> log2_gain{0, 0, 0};  // per channel, the median log₂(photo / point colour)
   float open_top_share = 0;  // share of the frame in sky-like grid cells connected to the top edge
+  bool gain_judged = false;  // every channel had min_samples_per_view usable samples
 };
 
 struct EffectsEvidence {
@@ -71,6 +72,11 @@ struct EffectsEvidence {
 
 // Throws std::invalid_argument when the track information does not match the points.
 EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& rules = {});
+
+// Each training view's colour gain against the SfM point colours, per channel (data.train
+// order): 2^log2_gain where the view's gain is judged (ViewEvidence::gain_judged), else 1 (no
+// evidence). A point of colour c looks like min(1, gain · c) in that view.
+std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules = {});
 
 // --effects auto: `configured` (the preset's and --config's set) plus appearance and
 // background when `evidence` calls for them; every line of `why` says why an effect is on or off.

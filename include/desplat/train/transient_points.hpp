@@ -34,12 +34,18 @@ struct TransientPointSettings {
   // own (COLMAP's mean over the track) by more than this, mean |Δ| over RGB in [0, 1] units:
   // a point matched across photos that disagree is not one surface.
   float color_tolerance = 0.25f;
+  // Compare after each view's exposure and white balance (train/effects.hpp, view_gains): the
+  // point's colour times the view's gain. Photos taken at different exposures disagree with a
+  // point's mean colour everywhere; without this a ±1-stop capture loses most of its points
+  // (docs/bench/issue17_ab.md, round 5). False: the colour as COLMAP stored it.
+  bool per_view_gain = true;
 };
 
 // Per point of `data` (1 = transient), from data.point_track_images and data.point_train_views.
 // A point without track information (both vectors empty: data not from a COLMAP model) is
 // never transient. Colours are compared at the pixel the point projects into (Camera::pixel_of) in each
-// observing training view, where it is in front of the camera and inside the image.
+// observing training view, where it is in front of the camera and inside the image, against
+// min(1, gain · colour) with the view's per-channel gain (per_view_gain) or the colour itself.
 std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& settings);
 
 }  // namespace desplat
