@@ -39,10 +39,11 @@ int main(int argc, char** argv) {
   app.add_flag("--static-only", o.static_only,
                "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
   app.add_option("--effects", o.effects,
-                 "what to model beyond the static scene: auto (the default: distractors, and appearance when the "
-                 "SfM tracks show the photos' exposure or colour balance differ), none, or a comma-separated "
-                 "list of distractors (per-view distractor Gaussians) and appearance (per-image exposure and "
-                 "colour; test views are then scored by the Photo Tourism protocol)");
+                 "what to model beyond the static scene: auto (the default: distractors, appearance when the "
+                 "SfM tracks show the photos' exposure or colour balance differ, background when open sky fills "
+                 "the top of the frames), none, or a comma-separated list of distractors (per-view distractor "
+                 "Gaussians), appearance (per-image exposure and colour; test views are then scored by the "
+                 "Photo Tourism protocol) and background (a learned colour per ray direction behind the scene)");
   app.add_option("--distractors-per-view", o.distractors_per_view,
                  "exactly N initial distractor Gaussians per training view (default: 1000 per 504x378 "
                  "pixels, the paper's density, scaled with the training image size)")

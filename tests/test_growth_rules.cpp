@@ -328,6 +328,38 @@ TEST(ViewResidual, PullsTheDistractorAlphaUpOnlyInsideAreasItAloneExplains) {
                   "width");
 }
 
+// What the growth rules count (distractors.count_connected_misses): the static misses that
+// survive a 3×3 opening. A 10×7 image, static 0.5 grey, opaque; the target is 0.9 (missed by
+// 0.4) on a 4×3 block (x 1–4, y 1–3), a one-pixel line (y 5, x 1–6) and one pixel (8, 1).
+// The block's interior is (2, 2) and (3, 2), whose 3×3 neighbourhoods cover the whole block:
+// 12 pixels in areas. The line has no interior (rows 4 and 6 are explained), nor the lone pixel.
+TEST(ViewResidual, CountsStaticMissesInsideConnectedAreasOnly) {
+  const int w = 10, h = 7, n = w * h;
+  std::vector<float> sc(3 * n, 0.5f), sa(n, 1.0f), target(3 * n, 0.5f);
+  const auto miss = [&](int x, int y) {
+    for (int c = 0; c < 3; ++c) target[3 * (y * w + x) + c] = 0.9f;
+  };
+  for (int y = 1; y <= 3; ++y)
+    for (int x = 1; x <= 4; ++x) miss(x, y);
+  for (int x = 1; x <= 6; ++x) miss(x, 5);
+  miss(8, 1);
+  std::vector<float> composite(3 * n);
+  composite_layers({sc, sa}, {}, std::array<float, 3>{0, 0, 0}, composite);
+  const ViewResidual r = measure_view_residual({sc, sa}, {}, composite, target, std::array<float, 3>{0, 0, 0}, w,
+                                               ResidualPenalties{0.1f, 0.0f, 0.0f}, {});
+  EXPECT_EQ(r.static_unexplained, 12 + 6 + 1);
+  EXPECT_EQ(r.static_unexplained_in_areas, 12);
+  EXPECT_NEAR(r.static_area_fraction(), 12.0 / n, 1e-12);
+  // An ignored pixel is no miss (as for the owned-pixel pull): ignoring (2, 2) takes the
+  // interior from both candidates, (2, 2) itself and its neighbour (3, 2), so no miss counts.
+  std::vector<float> keep(n, 1.0f);
+  keep[2 * w + 2] = 0;
+  const ViewResidual k = measure_view_residual({sc, sa}, {}, composite, target, std::array<float, 3>{0, 0, 0}, w,
+                                               ResidualPenalties{0.1f, 0.0f, 0.0f}, {}, nullptr, keep);
+  EXPECT_EQ(k.static_unexplained, 18);
+  EXPECT_EQ(k.static_unexplained_in_areas, 0);
+}
+
 // The same three pixels with pixel 2 (unexplained by both) ignored by the user's mask: it is in
 // no count and never uncovered; the penalty averages over the two kept pixels.
 TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
@@ -555,6 +587,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(def.densify.stats.visible_count_from_one);
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
   EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
+  EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
   EXPECT_TRUE(def.distractors.reseed_starved_views);

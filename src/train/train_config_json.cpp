@@ -90,6 +90,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.lambda_explained", &c.distractors.lambda_explained},
       {"distractors.lambda_owned", &c.distractors.lambda_owned},
       {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
+      {"distractors.count_connected_misses", &c.distractors.count_connected_misses},
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
       {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
       {"distractors.grow_after", &c.distractors.grow_after},

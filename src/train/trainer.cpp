@@ -293,7 +293,9 @@ StepStats Trainer::step() {
                             step_ >= ds.owned_after ? ds.lambda_owned : 0.0f},
           distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr, keep);
       stats.loss += residual.penalty;
-      view_static_unexplained[view] = float(residual.static_fraction());
+      // What the growth rules count as the static layer's misses (DistractorSettings).
+      view_static_unexplained[view] =
+          float(ds.count_connected_misses ? residual.static_area_fraction() : residual.static_fraction());
       view_composite_unexplained[view] = float(residual.composite_fraction());
     }
     stats.psnr = psnr(composite_, target.pixels, keep);

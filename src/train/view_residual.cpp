@@ -8,7 +8,7 @@
 namespace desplat {
 
 namespace {
-enum PixelClass : uint8_t { kIgnored = 1, kStaticExplains = 2, kCompositeExplains = 4 };
+enum PixelClass : uint8_t { kIgnored = 1, kStaticExplains = 2, kCompositeExplains = 4, kInteriorMiss = 8 };
 
 // Whether `set(p)` holds for pixel (x, y) and its 8 neighbours inside the image: the inside
 // of an area, as a transient object covers one. The one 3×3 rule of erode_mask and the
@@ -68,6 +68,20 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     if (mask) (*mask)[p] = !static_explains && !composite_explains;
     cls[p] = uint8_t((static_explains ? kStaticExplains : 0) | (composite_explains ? kCompositeExplains : 0));
   }
+  // The 3×3 opening of the static misses: a miss counts when it or a neighbour is an
+  // interior miss (itself and its 8 neighbours inside the image missed).
+  const auto missed = [&](size_t q) { return !(cls[q] & (kIgnored | kStaticExplains)); };
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const size_t p = size_t(y) * width + x;
+      if (missed(p) && interior_of(width, height, x, y, missed)) cls[p] |= kInteriorMiss;
+    }
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const size_t p = size_t(y) * width + x;
+      if (missed(p) && !interior_of(width, height, x, y, [&](size_t q) { return !(cls[q] & kInteriorMiss); }))
+        ++r.static_unexplained_in_areas;
+    }
   if (!penalize || r.pixels == 0) return r;
   const float explained_weight = penalties.lambda_explained / float(r.pixels);
   const float owned_weight = penalties.lambda_owned / float(r.pixels);
@@ -79,8 +93,7 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
       if (cls[p] & kStaticExplains) {  // a distractor here can only be memorizing static detail
         explained_sum += distractor.alpha[p];
         d_distractor_alpha[p] += explained_weight;
-      } else if (owned_weight > 0 && (cls[p] & kCompositeExplains) &&
-                 interior_of(width, height, x, y, [&](size_t q) { return !(cls[q] & (kIgnored | kStaticExplains)); })) {
+      } else if (owned_weight > 0 && (cls[p] & kCompositeExplains) && (cls[p] & kInteriorMiss)) {
         // Inside an area the static layer misses; its fine detail not yet fitted is thin.
         owned_sum += 1.0f - distractor.alpha[p];  // the distractor layer is this pixel's explanation
         d_distractor_alpha[p] -= owned_weight;

@@ -257,7 +257,8 @@ class Trainer {
   std::vector<int32_t> view_order;
   int64_t view_order_pos = 0;
   // Per training view, from its latest step (docs/METHOD.md §7, growth control): the fractions of pixels the
-  // static layer and the composite leave unexplained, and whether its latest refinement
+  // static layer (as distractors.count_connected_misses counts them) and the composite leave
+  // unexplained, and whether its latest refinement
   // found it starved or uncovered (seeded at its next step).
   std::vector<float> view_static_unexplained, view_composite_unexplained;
   std::vector<int32_t> view_seed_due;
