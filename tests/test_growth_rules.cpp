@@ -346,16 +346,21 @@ TEST(ViewResidual, CountsStaticMissesInsideConnectedAreasOnly) {
   std::vector<float> composite(3 * n);
   composite_layers({sc, sa}, {}, std::array<float, 3>{0, 0, 0}, composite);
   const ViewResidual r = measure_view_residual({sc, sa}, {}, composite, target, std::array<float, 3>{0, 0, 0}, w,
-                                               ResidualPenalties{0.1f, 0.0f, 0.0f}, {});
+                                               ResidualPenalties{0.1f, 0.0f, 0.0f, true}, {});
   EXPECT_EQ(r.static_unexplained, 12 + 6 + 1);
   EXPECT_EQ(r.static_unexplained_in_areas, 12);
   EXPECT_NEAR(r.static_area_fraction(), 12.0 / n, 1e-12);
+  // Not asked for (the default), the opening is skipped.
+  EXPECT_EQ(measure_view_residual({sc, sa}, {}, composite, target, std::array<float, 3>{0, 0, 0}, w,
+                                  ResidualPenalties{0.1f, 0.0f, 0.0f}, {})
+                .static_unexplained_in_areas,
+            0);
   // An ignored pixel is no miss (as for the owned-pixel pull): ignoring (2, 2) takes the
   // interior from both candidates, (2, 2) itself and its neighbour (3, 2), so no miss counts.
   std::vector<float> keep(n, 1.0f);
   keep[2 * w + 2] = 0;
   const ViewResidual k = measure_view_residual({sc, sa}, {}, composite, target, std::array<float, 3>{0, 0, 0}, w,
-                                               ResidualPenalties{0.1f, 0.0f, 0.0f}, {}, nullptr, keep);
+                                               ResidualPenalties{0.1f, 0.0f, 0.0f, true}, {}, nullptr, keep);
   EXPECT_EQ(k.static_unexplained, 18);
   EXPECT_EQ(k.static_unexplained_in_areas, 0);
 }

@@ -290,7 +290,7 @@ StepStats Trainer::step() {
       const ViewResidual residual = measure_view_residual(
           statics, distractor, composite_, target.pixels, bg, cam.width,
           ResidualPenalties{ds.explained_tolerance, ds.lambda_explained,
-                            step_ >= ds.owned_after ? ds.lambda_owned : 0.0f},
+                            step_ >= ds.owned_after ? ds.lambda_owned : 0.0f, ds.count_connected_misses},
           distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr, keep);
       stats.loss += residual.penalty;
       // What the growth rules count as the static layer's misses (DistractorSettings).

@@ -68,23 +68,27 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     if (mask) (*mask)[p] = !static_explains && !composite_explains;
     cls[p] = uint8_t((static_explains ? kStaticExplains : 0) | (composite_explains ? kCompositeExplains : 0));
   }
-  // The 3×3 opening of the static misses: a miss counts when it or a neighbour is an
-  // interior miss (itself and its 8 neighbours inside the image missed).
+  const float per_pixel = r.pixels ? 1.0f / float(r.pixels) : 0.0f;
+  const float explained_weight = penalties.lambda_explained * per_pixel;
+  const float owned_weight = penalize ? penalties.lambda_owned * per_pixel : 0.0f;
+  // Interior misses (a miss whose 8 neighbours inside the image are missed too), for the
+  // owned-pixel pull and the opening below; only when one of them asks.
   const auto missed = [&](size_t q) { return !(cls[q] & (kIgnored | kStaticExplains)); };
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      const size_t p = size_t(y) * width + x;
-      if (missed(p) && interior_of(width, height, x, y, missed)) cls[p] |= kInteriorMiss;
-    }
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      const size_t p = size_t(y) * width + x;
-      if (missed(p) && !interior_of(width, height, x, y, [&](size_t q) { return !(cls[q] & kInteriorMiss); }))
-        ++r.static_unexplained_in_areas;
-    }
+  if (owned_weight > 0 || penalties.count_in_areas)
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        if (missed(p) && interior_of(width, height, x, y, missed)) cls[p] |= kInteriorMiss;
+      }
+  // The 3×3 opening: a miss counts when it or a neighbour is an interior miss.
+  if (penalties.count_in_areas)
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        if (missed(p) && !interior_of(width, height, x, y, [&](size_t q) { return !(cls[q] & kInteriorMiss); }))
+          ++r.static_unexplained_in_areas;
+      }
   if (!penalize || r.pixels == 0) return r;
-  const float explained_weight = penalties.lambda_explained / float(r.pixels);
-  const float owned_weight = penalties.lambda_owned / float(r.pixels);
   double explained_sum = 0, owned_sum = 0;
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {

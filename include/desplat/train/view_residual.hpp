@@ -15,7 +15,8 @@ namespace desplat {
 struct ViewResidual {
   int64_t pixels = 0;
   int64_t static_unexplained = 0;     // mean |static layer over bg − target| over RGB ≥ tolerance
-  // Of those, the ones inside a connected area: the static misses that survive a 3×3 opening
+  // Of those, the ones inside a connected area (counted only with
+  // ResidualPenalties::count_in_areas): the static misses that survive a 3×3 opening
   // (erosion, then dilation, of the miss mask). Thin or isolated misses (edges, fine texture
   // not fitted yet) drop out; an area of 3×3 pixels or more keeps all its pixels.
   int64_t static_unexplained_in_areas = 0;
@@ -33,6 +34,9 @@ struct ResidualPenalties {
   float tolerance = 0.1f;         // a pixel is explained when mean |render − target| over RGB < this
   float lambda_explained = 0.0f;  // λ_e: pushes A_d down where the static layer alone explains the pixel
   float lambda_owned = 0.0f;      // λ_o: pulls A_d up where only the composite explains it
+  // Also count ViewResidual::static_unexplained_in_areas (distractors.count_connected_misses);
+  // off, the opening is skipped and the count stays 0.
+  bool count_in_areas = false;
 };
 
 // Measures one step's residual. `statics` and `distractor` are the rendered layers (the
