@@ -443,6 +443,7 @@ TrainConfig seeding_test_config(int num_downscales = 0) {
   c.distractors.initial_count = 100;
   c.distractors.reference_pixels = 0;
   c.distractors.refine_every_epochs = 1;
+  c.distractors.seed_after = 0;  // these tests seed within 400 steps
   c.threads = 1;
   return c;
 }
@@ -564,6 +565,63 @@ TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
   }
 }
 
+TEST(TrainerRules, SeedingWaitsForSeedAfterAndOnePeriodAfterAnOpacityReset) {
+  // --preset fast's schedule at one resolution: refinements every 100 steps after a 200-step
+  // warm-up, an opacity reset at the first refinement of every 1,000 steps (1,100 and
+  // 2,100; none from stop_split_at 2,500 on), seeding from step 1,000, a 105-step period.
+  TrainConfig c;
+  c.num_downscales = 0;
+  c.densify.warmup = 200;
+  c.densify.refine_every = 100;
+  c.densify.reset_alpha_every = 10;
+  c.densify.stop_split_at = 2500;
+  std::vector<int64_t> resets;
+  for (int64_t s = 0; s < 5000; ++s)
+    if (opacity_reset_due(c.densify, s)) resets.push_back(s);
+  EXPECT_EQ(resets, (std::vector<int64_t>{1100, 2100}));
+  c.densify.warmup = 1100;  // a reset on the warm-up's last step does not happen
+  EXPECT_FALSE(opacity_reset_due(c.densify, 1100));
+  c.densify.warmup = 200;
+
+  c.distractors.seed_after = 1000;
+  c.distractors.seed_waits_after_reset = true;
+  EXPECT_FALSE(seeding_allowed(c, 999, 105));
+  EXPECT_TRUE(seeding_allowed(c, 1000, 105));
+  EXPECT_TRUE(seeding_allowed(c, 1099, 105));
+  EXPECT_FALSE(seeding_allowed(c, 1100, 105));
+  EXPECT_FALSE(seeding_allowed(c, 1204, 105));  // 1,100 is within the last 105 steps
+  EXPECT_TRUE(seeding_allowed(c, 1205, 105));
+  EXPECT_FALSE(seeding_allowed(c, 2150, 105));
+  EXPECT_TRUE(seeding_allowed(c, 3100, 105));   // no reset from stop_split_at on
+  c.distractors.seed_waits_after_reset = false;
+  EXPECT_TRUE(seeding_allowed(c, 1100, 105));
+  c.distractors.seed_after = 0;
+  EXPECT_TRUE(seeding_allowed(c, 300, 105));
+
+  // In a trainer (as SeedingWaitsOnePeriodAfterAResolutionSwitch, one resolution): the
+  // refinement at 250 would seed the emptied view within 8 steps. With seeding from step 300,
+  // or with an opacity reset at 250 (every 4 refinements of 50 steps: 250 % 200 = 50), that
+  // refinement is too early and the one at 300 seeds it.
+  const TrainingData data = views_with_a_one_view_square();
+  for (const bool reset : {false, true}) {
+    TrainConfig tc = seeding_test_config(0);
+    if (reset) {
+      tc.densify.reset_alpha_every = 4;
+      tc.distractors.seed_waits_after_reset = true;
+    } else {
+      tc.distractors.seed_after = 300;
+    }
+    Trainer t(data, tc);
+    int64_t seeded_at = -1;
+    for (int i = 0; i < 400 && seeded_at < 0; ++i) {
+      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
+      if (t.step().reseeded > 0) seeded_at = i;
+    }
+    EXPECT_GT(seeded_at, 300) << "reset " << reset;
+    EXPECT_LE(seeded_at, 308) << "reset " << reset;
+  }
+}
+
 TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   const TrainConfig paper = preset_config("paper");
   EXPECT_TRUE(paper.densify.stats.visible_count_from_one);
@@ -581,6 +639,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
+  EXPECT_EQ(paper.distractors.seed_after, 0);
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
@@ -600,6 +659,8 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.grow_after, 0);
   EXPECT_EQ(def.distractors.lambda_owned, 0.2f);  // round 4
   EXPECT_EQ(def.distractors.owned_after, def.resolution_schedule);  // the first resolution switch
+  EXPECT_EQ(def.distractors.seed_after, def.resolution_schedule);   // round 7
+  EXPECT_TRUE(def.distractors.seed_waits_after_reset);
   EXPECT_EQ(def.distractors.refine_every_epochs, 3);  // round 4
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);
@@ -650,6 +711,11 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   same.densify.stop_screen_size_at = def.densify.stop_screen_size_at;
   same.densify.reset_alpha_every = def.densify.reset_alpha_every;
   same.distractors.owned_after = def.distractors.owned_after;
+  // Seeding from the warm-up on (docs/bench/issue17_ab.md, round 7).
+  EXPECT_EQ(fast.distractors.seed_after, 0);
+  EXPECT_FALSE(fast.distractors.seed_waits_after_reset);
+  same.distractors.seed_after = def.distractors.seed_after;
+  same.distractors.seed_waits_after_reset = def.distractors.seed_waits_after_reset;
   EXPECT_EQ(config_to_json(same).dump(), config_to_json(def).dump());
 }
 

@@ -75,6 +75,11 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   EXPECT_NE(r.output.find("never trains at full resolution (the resolution schedule reaches it at step 6000 of 120)"),
             std::string::npos)
       << r.output;
+  // … and before the default's distractor seeding (from step 3,000).
+  EXPECT_NE(r.output.find("warning: distractor seeding starts at step 3000 (distractors.seed_after), after this "
+                          "run's 120 steps"),
+            std::string::npos)
+      << r.output;
   nlohmann::json metrics;
   std::ifstream(out / "metrics.json") >> metrics;
   EXPECT_EQ(metrics["step"], 120);

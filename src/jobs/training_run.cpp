@@ -380,6 +380,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     std::printf("warning: this run never trains at full resolution (the resolution schedule reaches it at step "
                 "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
                 (long long)full_resolution_from, (long long)config.iterations);
+  // The default waits for step 3,000 before seeding distractors (docs/METHOD.md §7): a
+  // shorter run never grows a buffer onto an occluder its initial distractors missed.
+  const DistractorSettings& ds = config.distractors;
+  if (config.distractors.enabled && (ds.seed_uncovered || ds.reseed_starved_views) && ds.seed_after >= config.iterations)
+    std::printf("warning: distractor seeding starts at step %d (distractors.seed_after), after this run's %lld steps; "
+                "for a run this short use --preset fast, or add {\"distractors\": {\"seed_after\": 0}} to --config\n",
+                ds.seed_after, (long long)config.iterations);
 
   if (config.appearance.enabled)
     std::printf("appearance model: embeddings of %d per training image and %d per Gaussian, MLP %d x %d; test views are "

@@ -70,13 +70,19 @@ GaussianSet split_samples(const GaussianSet& g, const std::vector<uint8_t>& mask
   return out;
 }
 
+bool opacity_reset_due(const DensifySettings& s, int64_t step) {
+  const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
+  return s.enabled && step > s.warmup && step % s.refine_every == 0 && step < s.stop_split_at &&
+         step % reset_interval == s.refine_every;
+}
+
 RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
                               int num_train_views, std::mt19937_64& rng) {
   if (!s.enabled || step <= s.warmup || step % s.refine_every != 0) return {};
   const int64_t reset_interval = int64_t(s.reset_alpha_every) * s.refine_every;
   const bool densify = step < s.stop_split_at && step % reset_interval > num_train_views + s.refine_every;
   RefineReport report = apply_density_control(g, s, step, image_size, densify, false, rng);
-  if (step < s.stop_split_at && step % reset_interval == s.refine_every) {
+  if (opacity_reset_due(s, step)) {
     const float cap = logit(2.0f * s.cull_alpha);
     const int opacity = int(ParamGroup::OpacityLogits);
     for (size_t i = 0; i < g.size(); ++i) {

@@ -93,8 +93,10 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.count_connected_misses", &c.distractors.count_connected_misses},
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
       {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
+      {"distractors.seed_waits_after_reset", &c.distractors.seed_waits_after_reset},
       {"distractors.grow_after", &c.distractors.grow_after},
       {"distractors.owned_after", &c.distractors.owned_after},
+      {"distractors.seed_after", &c.distractors.seed_after},
       {"appearance.enabled", &c.appearance.enabled},
       {"appearance.image_dim", &c.appearance.image_dim},
       {"appearance.fourier_frequencies", &c.appearance.fourier_frequencies},
@@ -185,6 +187,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.pixels_per_distractor", c.distractors.pixels_per_distractor, 0, kBig, false, "≥ 0");
   require("distractors.grow_after", c.distractors.grow_after, 0, kBig, false, "≥ 0");
   require("distractors.owned_after", c.distractors.owned_after, 0, kBig, false, "≥ 0");
+  require("distractors.seed_after", c.distractors.seed_after, 0, kBig, false, "≥ 0");
   require("appearance.image_dim", c.appearance.image_dim, 1, 4096, false, "1..4096");
   require("appearance.fourier_frequencies", c.appearance.fourier_frequencies, 1, 16, false, "1..16");
   require("appearance.hidden_width", c.appearance.hidden_width, 1, 4096, false, "1..4096");

@@ -431,9 +431,17 @@ bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period)
   return config.downscale_at(step) == config.downscale_at(std::max<int64_t>(0, step - period));
 }
 
+bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period) {
+  if (step < config.distractors.seed_after || !resolution_settled(config, step, period)) return false;
+  if (!config.distractors.seed_waits_after_reset) return true;
+  for (int64_t s = step; s > std::max<int64_t>(0, step - period); --s)
+    if (opacity_reset_due(config.densify, s)) return false;
+  return true;
+}
+
 bool Trainer::seeding_settled() const {
   const int64_t period = int64_t(config_.distractors.refine_every_epochs) * int64_t(data_.train.size());
-  return resolution_settled(config_, step_, period);
+  return seeding_allowed(config_, step_, period);
 }
 
 int64_t Trainer::seed_if_due(int view, const Camera& cam, const FloatImage& target) {

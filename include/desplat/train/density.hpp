@@ -60,6 +60,11 @@ constexpr int64_t kUnlimitedGrowth = -1;
 RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, int64_t step, int image_size,
                               int num_train_views, std::mt19937_64& rng);
 
+// Whether refine_gaussians resets the static opacities after step `step`: at the first
+// refinement of every reset_alpha_every·refine_every steps, after the warm-up and before
+// stop_split_at.
+bool opacity_reset_due(const DensifySettings& s, int64_t step);
+
 // One refinement regardless of the schedule: densify (split/duplicate) when `densify`,
 // then cull (opacity, and the scale/screen-size rules by `step`); with `cull_unseen`
 // also every Gaussian not seen since the last refinement (zero max screen radius: the

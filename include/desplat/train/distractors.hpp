@@ -78,6 +78,14 @@ struct DistractorSettings {
   // grows distractors only where some already are, so an occluder no distractor reaches
   // would otherwise stay unexplained, and the static layer would fit it.
   bool seed_uncovered = true;
+  // Seeding (the starved and uncovered rules) waits for step seed_after, the first
+  // resolution switch: before it the static layer still misses detail everywhere, and a seed
+  // there takes a region the static layer would have fitted. 0: from the warm-up on (--preset
+  // fast and paper). Measured in docs/bench/issue17_ab.md, round 7.
+  int seed_after = 3000;
+  // Seeding also waits one refinement period after a static opacity reset, as after a
+  // resolution switch: right after it the static layer is partly transparent everywhere.
+  bool seed_waits_after_reset = true;
   // Distractor densification starts after this step (culling runs from the warm-up on), so
   // the static layer has had its chance at content few views see.
   int grow_after = 0;

@@ -308,7 +308,7 @@ class Trainer {
   // Seeds this step's view when its latest refinement found it starved or uncovered and this
   // step's residual agrees (docs/METHOD.md §7, growth control). Returns the count added.
   int64_t seed_if_due(int view, const Camera& camera, const FloatImage& target);
-  // resolution_settled for this step, over one distractor-refinement period.
+  // seeding_allowed for this step, over one distractor-refinement period.
   bool seeding_settled() const;
   // TransientPointAction::seed: distractors where the transient points project in the
   // training views that observe them.
@@ -320,6 +320,11 @@ class Trainer {
 // because the residual right after it is the static layer's missing detail at the new
 // resolution, not a transient object (docs/METHOD.md §7, growth control).
 bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period);
+
+// Whether the distractor seeding rules may run at `step`: resolution_settled, from
+// distractors.seed_after on, and (with distractors.seed_waits_after_reset) no static opacity
+// reset in the last `period` steps (docs/METHOD.md §7, growth control).
+bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period);
 
 // The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
