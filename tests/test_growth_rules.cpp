@@ -3,6 +3,7 @@
 // budget, starved buffers and their re-seeding, the explained-pixel penalty and the presets.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "desplat/train/density.hpp"
@@ -626,6 +627,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   const TrainConfig paper = preset_config("paper");
   EXPECT_TRUE(paper.densify.stats.visible_count_from_one);
   EXPECT_TRUE(paper.densify.stats.radius_from_eigenvalue);
+  EXPECT_FALSE(paper.densify.stats.hide_behind_distractors);
   EXPECT_FALSE(paper.densify.stats.normalize_each_step);
   EXPECT_FALSE(paper.densify.split_screen_needs_grad);
   EXPECT_FALSE(paper.densify.inherit_moments);
@@ -652,6 +654,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
   EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
   EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
+  EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
   EXPECT_TRUE(def.distractors.reseed_starved_views);
@@ -717,6 +720,57 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   same.distractors.seed_after = def.distractors.seed_after;
   same.distractors.seed_waits_after_reset = def.distractors.seed_waits_after_reset;
   EXPECT_EQ(config_to_json(same).dump(), config_to_json(def).dump());
+}
+
+TEST(TrainerRules, HideUnseenCentersHidesCentresOnIgnoredPixelsAndBehindADistractorMask) {
+  // A 4×2 image; five visible Gaussians but one. Centres: pixel 0 (ignored), pixel 1 (A_d
+  // 0.6), pixel 2 (A_d exactly the threshold 0.5: still seen), pixel 7 (A_d 0.9, already not
+  // visible) and one left of the image (no pixel to judge: stays visible).
+  RasterOutput fw;
+  fw.width = 4, fw.height = 2;
+  fw.means2d = {0.5f, 0.5f, 1.5f, 0.5f, 2.5f, 0.5f, 3.5f, 1.5f, -1.0f, 0.5f};
+  fw.visible = {1, 1, 1, 0, 1};
+  const std::vector<float> keep = {0, 1, 1, 1, 1, 1, 1, 1};
+  const std::vector<float> alpha = {0, 0.6f, 0.5f, 0, 0, 0, 0, 0.9f};
+  RasterOutput both = fw;
+  hide_unseen_centers(both, keep, alpha);
+  EXPECT_EQ(both.visible, (std::vector<uint8_t>{0, 0, 1, 0, 1}));
+  RasterOutput keep_only = fw;
+  hide_unseen_centers(keep_only, keep, {});
+  EXPECT_EQ(keep_only.visible, (std::vector<uint8_t>{0, 1, 1, 0, 1}));
+  RasterOutput alpha_only = fw;
+  hide_unseen_centers(alpha_only, {}, alpha);
+  EXPECT_EQ(alpha_only.visible, (std::vector<uint8_t>{1, 0, 1, 0, 1}));
+}
+
+TEST(TrainerRules, StaticGaussiansBehindADistractorMaskAreNotCountedAsSeen) {
+  // No refinement within the run, so the statistics never feed back: both runs train the same
+  // Gaussians, and with the switch on a static Gaussian counts a step only when its centre is
+  // not behind view 0's distractors over the square.
+  const TrainingData data = views_with_a_one_view_square();
+  auto run = [&](bool hide) {
+    TrainConfig c = seeding_test_config();
+    c.densify.warmup = 10000;
+    c.densify.stats.hide_behind_distractors = hide;
+    Trainer t(data, c);
+    for (int i = 0; i < 400; ++i) t.step();
+    return t;
+  };
+  const Trainer off = run(false), on = run(true);
+  EXPECT_EQ(on.gaussians().params.means, off.gaussians().params.means);
+  const std::vector<int32_t>& seen_on = on.gaussians().visible_count;
+  const std::vector<int32_t>& seen_off = off.gaussians().visible_count;
+  ASSERT_EQ(seen_on.size(), seen_off.size());
+  int64_t hidden = 0;
+  for (size_t i = 0; i < seen_on.size(); ++i) {
+    EXPECT_LE(seen_on[i], seen_off[i]) << "Gaussian " << i;
+    hidden += seen_off[i] - seen_on[i];
+  }
+  // View 0 is drawn 50 times in 400 steps; its square's distractors hide some static centres.
+  EXPECT_GT(hidden, 0);
+  const ViewLayers layers = on.render_layers(0, {0, 0, 0});
+  EXPECT_GT(*std::max_element(layers.distractor_alpha.pixels.begin(), layers.distractor_alpha.pixels.end()),
+            kDistractorMaskThreshold);
 }
 
 }  // namespace

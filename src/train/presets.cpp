@@ -32,6 +32,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stats.normalize_each_step = false;
     c.densify.stats.visible_count_from_one = true;
     c.densify.stats.radius_from_eigenvalue = true;
+    c.densify.stats.hide_behind_distractors = false;
     c.densify.split_screen_needs_grad = false;
     c.densify.inherit_moments = false;
     c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view

@@ -67,6 +67,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.normalize_each_step", &c.densify.stats.normalize_each_step},
       {"densify.visible_count_from_one", &c.densify.stats.visible_count_from_one},
       {"densify.radius_from_eigenvalue", &c.densify.stats.radius_from_eigenvalue},
+      {"densify.hide_behind_distractors", &c.densify.stats.hide_behind_distractors},
       {"densify.split_screen_needs_grad", &c.densify.split_screen_needs_grad},
       {"densify.inherit_moments", &c.densify.inherit_moments},
       {"distractors.enabled", &c.distractors.enabled},

@@ -189,23 +189,6 @@ std::span<const float> Trainer::keep_at(int view, int factor) {
   return keep_;
 }
 
-namespace {
-
-// A Gaussian whose projected center lies on an ignored pixel does not count as seen in this
-// step for the densification statistics (its gradient from ignored pixels is zero anyway;
-// counting the view would only dilute its mean gradient).
-void hide_ignored_centers(RasterOutput& fw, std::span<const float> keep) {
-  if (keep.empty()) return;
-  for (size_t i = 0; i < fw.visible.size(); ++i) {
-    if (!fw.visible[i]) continue;
-    const float x = fw.means2d[2 * i], y = fw.means2d[2 * i + 1];
-    if (!(x >= 0 && y >= 0 && x < float(fw.width) && y < float(fw.height))) continue;
-    if (keep[size_t(y) * size_t(fw.width) + size_t(x)] == 0) fw.visible[i] = 0;
-  }
-}
-
-}  // namespace
-
 // The rows Adam updates this step: the Gaussians the rasterizer found visible (the only ones
 // with a gradient), or every row (empty span) when selective Adam is off.
 std::span<const uint8_t> Trainer::adam_rows(const RasterOutput& forward) const {
@@ -341,7 +324,9 @@ StepStats Trainer::step() {
     const int sh_bands = rs.active_sh_degree + 1;
     gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands,
                            adam_rows(static_pass_.forward));
-    hide_ignored_centers(static_pass_.forward, keep);
+    // Behind this view's distractor mask a static Gaussian is not seen (hide_behind_distractors).
+    const bool hide_behind = distractors && config_.densify.stats.hide_behind_distractors;
+    hide_unseen_centers(static_pass_.forward, keep, hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
     if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
@@ -359,7 +344,7 @@ StepStats Trainer::step() {
         LearningRates dlr = config_.distractors.lr;
         dlr.means = float(dlr.means * decay);
         distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{}, -1, adam_rows(distractor_pass_.forward));
-        hide_ignored_centers(distractor_pass_.forward, keep);
+        hide_unseen_centers(distractor_pass_.forward, keep, {});
         distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
         stats.nonfinite_pruned +=
             prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
@@ -429,6 +414,18 @@ void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) 
 
 bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period) {
   return config.downscale_at(step) == config.downscale_at(std::max<int64_t>(0, step - period));
+}
+
+void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::span<const float> hiding_alpha) {
+  if (keep.empty() && hiding_alpha.empty()) return;
+  for (size_t i = 0; i < fw.visible.size(); ++i) {
+    if (!fw.visible[i]) continue;
+    const float x = fw.means2d[2 * i], y = fw.means2d[2 * i + 1];
+    if (!(x >= 0 && y >= 0 && x < float(fw.width) && y < float(fw.height))) continue;
+    const size_t p = size_t(y) * size_t(fw.width) + size_t(x);
+    if ((!keep.empty() && keep[p] == 0) || (!hiding_alpha.empty() && hiding_alpha[p] > kDistractorMaskThreshold))
+      fw.visible[i] = 0;
+  }
 }
 
 bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period) {

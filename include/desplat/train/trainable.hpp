@@ -29,6 +29,13 @@ struct StatisticsRules {
   // true (authors' gsplat): screen radius 3·√λmax of the 2D covariance. false: the
   // larger of the rasterizer's per-axis extents 3.33·√Σii.
   bool radius_from_eigenvalue = false;
+  // true: a static Gaussian whose projected centre lies where this step's distractor layer is
+  // a mask (A_d > kDistractorMaskThreshold) does not count as seen by the view, as a centre on
+  // an ignored pixel does not: its gradient there passes through 1 − A_d < ½, so counting the
+  // view dilutes the mean gradient of what lies behind an occluder. false (authors): every
+  // view it projects into counts. Measured and not kept (docs/bench/issue17_ab.md, round 8):
+  // +0.40 dB on clutter_tracks_100 at 500×375, −0.17 to −0.22 dB on three occluded fox scenes.
+  bool hide_behind_distractors = false;
 };
 
 // Adam hyper-parameters (docs/METHOD.md §6).

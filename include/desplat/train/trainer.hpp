@@ -326,6 +326,13 @@ bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period)
 // reset in the last `period` steps (docs/METHOD.md §7, growth control).
 bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period);
 
+// What the densification statistics count as seen this step (docs/METHOD.md §7): a visible
+// Gaussian whose projected centre lies on an ignored pixel (keep = 0; its gradient from there
+// is zero) or where `hiding_alpha` > kDistractorMaskThreshold (the view's distractor layer
+// covers it; densify.hide_behind_distractors) is marked not visible in `fw`, so the view does
+// not dilute its mean gradient. `keep` and `hiding_alpha` are [H·W] of fw's image, or empty.
+void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::span<const float> hiding_alpha);
+
 // The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
 
