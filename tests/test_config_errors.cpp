@@ -45,6 +45,8 @@ TEST(ConfigErrors, UselessRatesAndSizes) {
   EXPECT_CONTAINS(error_for({{"background", {{"hidden_layers", 0}}}}), "background.hidden_layers must be 1..16 (got 0)");
   EXPECT_CONTAINS(error_for({{"background", {{"explained_share", 1.0}}}}), "background.explained_share must be in [0, 1)");
   EXPECT_CONTAINS(error_for({{"background", {{"lr", {{"mlp", -1}}}}}}), "background.lr.mlp must be ≥ 0");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"min_blend_weight", -1}}}}),
+                  "config: distractors.min_blend_weight must be ≥ 0 (got -1)");
   // Zero where zero is meaningful stays allowed: a frozen group, no regularizer, no cap.
   EXPECT_NO_THROW(config_from_json({{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
 }

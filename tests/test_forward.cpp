@@ -1,6 +1,9 @@
 // The tiled forward kernel against the brute-force double-precision reference.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <random>
+
 #include "desplat/raster/raster.hpp"
 #include "support/reference_render.hpp"
 #include "support/scenes.hpp"
@@ -167,6 +170,71 @@ TEST(Forward, OpacityExtentCoversEveryPixelWhereAlphaReachesTheCutoff) {
   EXPECT_GT(checked, 1000);
   EXPECT_GT(never, 5);
   EXPECT_GT(narrower, 50);
+}
+
+
+// blend_weights against two independent answers: the closed form for one unoccluded Gaussian,
+// and the backward pass's colour gradient (∂ΣC_red/∂c_red,i = Σ_p αᵢTᵢ), which is itself
+// checked against Jet derivatives in test_backward.cpp.
+TEST(BlendWeights, OneGaussianMatchesTheClosedFormIntegral) {
+  // Identity pose, a round Gaussian 1 unit in front: σ = f·s px on screen, plus the 0.3 px²
+  // blur. Its α ≥ 1/255 inside q ≤ 2·ln(255·o), so Σ_p α ≈ ∫ o·e^(−q/2) over that disc =
+  // 2π·√det Σ2d · (o − 1/255).
+  Camera cam;
+  cam.width = cam.height = 96;
+  cam.fx = cam.fy = 100;
+  cam.cx = cam.cy = 48;
+  GaussianSet g;
+  g.color_mode = ColorMode::RGB;
+  g.resize(1);
+  g.means = {0, 0, 1};
+  const double scale = 0.06;  // 6 px
+  for (int k = 0; k < 3; ++k) g.log_scales[k] = float(std::log(scale));
+  g.quats = {1, 0, 0, 0};
+  const double o = 0.6;
+  g.opacity_logits[0] = float(std::log(o / (1 - o)));
+  g.colors = {0.5f, 0.5f, 0.5f};
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, RasterSettings{}, out);
+  const double var = (100 * scale) * (100 * scale) + 0.3;
+  const double expected = 2 * M_PI * var * (o - 1.0 / 255);
+  const std::vector<double> w = blend_weights(out);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NEAR(w[0], expected, 1e-3 * expected);
+}
+
+TEST(BlendWeights, EqualTheBackwardColourGradientAndSumToTheAlphaImage) {
+  for (int seed = 0; seed < 4; ++seed) {
+    std::mt19937 rng(77 + seed);
+    const Camera cam = random_camera(rng, 53, 41, 50);
+    SceneSpec spec;
+    spec.count = 150;
+    spec.mode = ColorMode::RGB;
+    spec.sh_degree = 0;
+    const GaussianSet g = random_gaussians(rng, spec);
+    RasterSettings s;
+    RasterOutput out;
+    rasterize_forward(g.view(), cam, s, out);
+    const std::vector<double> w = blend_weights(out);
+    ASSERT_EQ(w.size(), g.size());
+    std::vector<float> d_color(3 * size_t(cam.width) * cam.height, 0.0f);
+    for (size_t p = 0; p < d_color.size(); p += 3) d_color[p] = 1.0f;  // L = Σ_p C_red(p)
+    RasterGradients grads;
+    rasterize_backward(g.view(), cam, s, out, d_color, {}, {}, grads);
+    double total = 0, alpha_sum = 0;
+    int weighted = 0;
+    for (size_t i = 0; i < g.size(); ++i) {
+      EXPECT_NEAR(w[i], grads.colors[3 * i], 1e-4 * std::max(1.0, w[i])) << "seed " << seed << " Gaussian " << i;
+      if (!out.visible[i]) {
+        EXPECT_EQ(w[i], 0.0);
+      }
+      total += w[i];
+      weighted += w[i] > 1;
+    }
+    for (float a : out.alpha) alpha_sum += a;
+    EXPECT_NEAR(total, alpha_sum, 1e-5 * alpha_sum) << "seed " << seed;
+    EXPECT_GT(weighted, 20) << "seed " << seed;  // the scene exercises the blending
+  }
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "desplat/train/density.hpp"
@@ -210,6 +211,66 @@ TEST(DistractorGrowth, UncoveredSeedCountIsOnePerAPixelsUnderTheCap) {
   EXPECT_EQ(uncovered_seed_count(0, 0.2, 0.011, 10000, s), 27);   // 110 px / 4, rounded down
   s.pixels_per_distractor = 0;                                    // no cap: 4 px each, unbounded room
   EXPECT_EQ(uncovered_seed_count(1000000, 0.2, 0.1, 10000, s), 250);
+}
+
+// Round distractors in front of an identity camera: world (x, y, z) with world scale `scale`
+// and opacity o, so each is a disc of σ = f·scale/z px on screen.
+GaussianSet round_distractors(const std::vector<std::array<float, 5>>& xyz_scale_opacity) {
+  GaussianSet g;
+  g.color_mode = ColorMode::RGB;
+  g.resize(xyz_scale_opacity.size());
+  for (size_t i = 0; i < g.size(); ++i) {
+    const auto& d = xyz_scale_opacity[i];
+    for (int k = 0; k < 3; ++k) g.means[3 * i + k] = d[k], g.log_scales[3 * i + k] = std::log(d[3]);
+    g.quats[4 * i] = 1;
+    g.opacity_logits[i] = logit(d[4]);
+    for (int c = 0; c < 3; ++c) g.colors[3 * i + c] = 0.5f;
+  }
+  return g;
+}
+
+Camera identity_camera(int size, float focal) {
+  Camera cam;
+  cam.width = cam.height = size;
+  cam.fx = cam.fy = focal;
+  cam.cx = cam.cy = size * 0.5f;
+  return cam;
+}
+
+TEST(DistractorGrowth, IdleCullRemovesDistractorsHiddenOrOffScreenAndKeepsVisibleOnes) {
+  // 64×64 px, f = 100, threshold 1 px. A: a 20 px opaque disc at the centre, in front.
+  // B: a 2 px disc (o = 0.5) right behind A, where A's T ≤ 1 − 0.999·e^(−6²/(2·20²)) ≈ 0.045,
+  // so B's weight is ≤ 0.045 · 2π·4.3·0.5 ≈ 0.6 px (alone it would be ≈ 13.4 px).
+  // C: behind the camera (weight 0). D: a 3 px disc (o = 0.5) alone, off A's side:
+  // 2π·(9 + 0.3)·(0.5 − 1/255) ≈ 29 px.
+  TrainableGaussians g(round_distractors({{0.0f, 0.0f, 1.0f, 0.2f, 0.9999f},
+                                          {0.0f, 0.0f, 2.0f, 0.04f, 0.5f},
+                                          {0.0f, 0.0f, -1.0f, 0.05f, 0.9f},
+                                          {0.24f, 0.24f, 1.0f, 0.03f, 0.5f}}));
+  DistractorSettings s;
+  s.min_blend_weight = 1.0f;
+  EXPECT_EQ(cull_idle_distractors(g, identity_camera(64, 100), 1, s), 2);
+  ASSERT_EQ(g.size(), 2u);
+  EXPECT_FLOAT_EQ(g.params.means[2], 1.0f);   // A
+  EXPECT_FLOAT_EQ(g.params.means[3], 0.24f);  // D
+  // Off (the paper's setting): nothing is removed, whatever the weights.
+  TrainableGaussians h(round_distractors({{0.0f, 0.0f, -1.0f, 0.05f, 0.9f}}));
+  s.min_blend_weight = 0.0f;
+  EXPECT_EQ(cull_idle_distractors(h, identity_camera(64, 100), 1, s), 0);
+  EXPECT_EQ(h.size(), 1u);
+}
+
+TEST(DistractorGrowth, IdleCullCountsPixelsAtFullTrainingResolution) {
+  // A 1.5 px disc on a half-size camera: 2π·(1.5² + 0.3)·(0.5 − 1/255) ≈ 7.95 px there,
+  // ≈ 31.8 px of the full-size view. With a threshold of 20 px it stays when the camera is the
+  // view at factor 2 and goes when the same camera is taken as full size.
+  DistractorSettings s;
+  s.min_blend_weight = 20.0f;
+  TrainableGaussians at_half(round_distractors({{0.0f, 0.0f, 1.0f, 0.03f, 0.5f}}));
+  EXPECT_EQ(cull_idle_distractors(at_half, identity_camera(32, 50), 2, s), 0);
+  TrainableGaussians as_full(round_distractors({{0.0f, 0.0f, 1.0f, 0.03f, 0.5f}}));
+  EXPECT_EQ(cull_idle_distractors(as_full, identity_camera(32, 50), 1, s), 1);
+  EXPECT_EQ(as_full.size(), 0u);
 }
 
 TEST(ViewResidual, ErosionKeepsOnlyRegionInteriors) {
@@ -642,6 +703,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(paper.distractors.seed_uncovered);
   EXPECT_EQ(paper.distractors.grow_after, 0);
   EXPECT_EQ(paper.distractors.seed_after, 0);
+  EXPECT_EQ(paper.distractors.min_blend_weight, 0.0f);  // no idle cull
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
@@ -664,6 +726,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.owned_after, def.resolution_schedule);  // the first resolution switch
   EXPECT_EQ(def.distractors.seed_after, def.resolution_schedule);   // round 7
   EXPECT_TRUE(def.distractors.seed_waits_after_reset);
+  EXPECT_EQ(def.distractors.min_blend_weight, 0.0f);  // the idle cull, measured, not kept: issue17_ab.md, round 9
   EXPECT_EQ(def.distractors.refine_every_epochs, 3);  // round 4
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);

@@ -238,7 +238,8 @@ TrainingData load_training_data(const Scene& scene) {
 }
 
 // One distractor refinement for the history: per view, the buffer before and after, the
-// growth budget, the high-gradient candidates, splits, duplicates, culls and the
+// growth budget, the high-gradient candidates, splits, duplicates, culls (idle_culled: by the
+// idle cull, before growth) and the
 // distribution of mean gradient / threshold (docs/METHOD.md §7).
 json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
   json views = json::array();
@@ -251,6 +252,7 @@ json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
                      {"split", r.report.split},
                      {"duplicated", r.report.duplicated},
                      {"culled", r.report.culled},
+                     {"idle_culled", r.idle},
                      {"held_back", r.report.held_back},
                      {"gradient_ratio_bins", r.report.gradient_ratio_bins},
                      {"static_unexplained", trainer.view_static_unexplained[r.view]},

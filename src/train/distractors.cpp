@@ -6,6 +6,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "desplat/raster/raster.hpp"
 #include "desplat/train/init.hpp"
 
 namespace desplat {
@@ -57,6 +58,26 @@ RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d,
                                 int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new) {
   const bool densify = step < d.stop_split_at && step > s.grow_after;
   return apply_density_control(g, d, step, image_size, densify, /*cull_unseen=*/true, rng, max_new);
+}
+
+int64_t cull_idle_distractors(TrainableGaussians& g, const Camera& camera, int factor, const DistractorSettings& s) {
+  if (!(s.min_blend_weight > 0.0f) || g.size() == 0) return 0;
+  if (factor < 1) throw std::invalid_argument("cull_idle_distractors: factor must be ≥ 1");
+  RasterSettings rs;
+  rs.num_threads = 1;
+  RasterOutput render;
+  rasterize_forward(g.params.view(), camera, rs, render);
+  const std::vector<double> weight = blend_weights(render);
+  // A pixel at the step's size covers factor² pixels at full training resolution.
+  const double to_full_px = double(factor) * double(factor);
+  std::vector<uint8_t> keep(g.size());
+  int64_t culled = 0;
+  for (size_t i = 0; i < g.size(); ++i) {
+    keep[i] = weight[i] * to_full_px >= double(s.min_blend_weight);
+    culled += !keep[i];
+  }
+  if (culled > 0) g.keep(keep);
+  return culled;
 }
 
 int64_t distractor_cap(double static_unexplained_fraction, int64_t pixels, const DistractorSettings& s) {

@@ -46,6 +46,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.grow_after = 0;
     c.distractors.seed_after = 0;  // seeding is off; stated for the record
     c.distractors.seed_waits_after_reset = false;
+    c.distractors.min_blend_weight = 0.0f;  // no idle cull; the default too, stated for the record
     c.transient_points.action = TransientPointAction::keep;
     c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
     c.background.lambda_opaque = 0.0f;  // the authors' L_bg alone (docs/METHOD.md §11)

@@ -350,7 +350,7 @@ StepStats Trainer::step() {
             prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
       }
       stats.reseeded = seed_if_due(view, cam, target);
-      if (refine_distractors_now) refine_all_distractors(image_size, stats);
+      if (refine_distractors_now) refine_all_distractors(image_size, factor, stats);
     });
   }
   stats.timings = profile.timings;
@@ -359,7 +359,7 @@ StepStats Trainer::step() {
   return stats;
 }
 
-void Trainer::refine_all_distractors(int image_size, StepStats& stats) {
+void Trainer::refine_all_distractors(int image_size, int factor, StepStats& stats) {
   stats.distractor_refine.ran = true;
   const DistractorSettings& ds = config_.distractors;
   for (size_t v = 0; v < distractors_.size(); ++v) {
@@ -367,8 +367,12 @@ void Trainer::refine_all_distractors(int image_size, StepStats& stats) {
     const Camera& full = data_.train[v].camera;
     const int64_t pixels = int64_t(full.width) * full.height;
     if (d.size() > 0) {
-      ViewRefinement r{int(v), int64_t(d.size()), 0,
-                       distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds), {}};
+      ViewRefinement r;
+      r.view = int(v);
+      r.before = int64_t(d.size());
+      // Idle distractors go first, so the cap's room goes to the ones the view needs.
+      r.idle = cull_idle_distractors(d, downscale_camera(full, factor), factor, ds);
+      r.budget = distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds);
       r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget);
       r.after = int64_t(d.size());
       stats.distractor_refine += r.report;

@@ -156,4 +156,11 @@ void rasterize_backward(const GaussianView& gaussians, const Camera& camera,
                         std::span<const float> dL_ddepth, RasterGradients& grads,
                         std::span<const float> rgb_scale = {});
 
+// Per Gaussian, its blend weight summed over the render's pixels, Σ_p αᵢ(p)·Tᵢ(p) [px]: how
+// much of the image it makes (a fully opaque, unoccluded Gaussian covering k pixels: ≈ k).
+// For each pixel the weights of all Gaussians add up to out.alpha. `out` must come from
+// rasterize_forward (or rasterize_blend); [N], zero for invisible Gaussians. One thread: for
+// density control on small layers (the distractors), not for every step.
+std::vector<double> blend_weights(const RasterOutput& out);
+
 }  // namespace desplat

@@ -89,6 +89,15 @@ struct DistractorSettings {
   // Distractor densification starts after this step (culling runs from the warm-up on), so
   // the static layer has had its chance at content few views see.
   int grow_after = 0;
+  // Idle cull: at each refinement, before growth, a distractor whose blend weight in its
+  // view (Σ over pixels of α·T, blend_weights) is below this many pixels of the view at full
+  // training resolution is culled. Such a distractor changes its photo's render by less than
+  // this many pixels' worth of colour: hidden behind other distractors, nearly transparent or
+  // off screen, it costs time and keeps the cap's room from Gaussians that are needed.
+  // 0: off, the default: at 1 px it held test PSNR and raised mask IoU on the occluded fox
+  // scenes but lost 0.18–0.46 dB and 0.03 IoU on the clutter benchmark at 500×375
+  // (docs/bench/issue17_ab.md, round 9).
+  float min_blend_weight = 0.0f;
 };
 
 // K for a view of this camera's size: initial_count scaled by pixels / reference_pixels
@@ -115,6 +124,13 @@ bool distractor_refine_due(int64_t step, int num_train_views, const DensifySetti
 RefineReport refine_distractors(TrainableGaussians& view_distractors, const DensifySettings& densify,
                                 const DistractorSettings& settings, int64_t step, int image_size, std::mt19937_64& rng,
                                 int64_t max_new = kUnlimitedGrowth);
+
+// The idle cull (DistractorSettings::min_blend_weight): renders `view_distractors` with
+// `camera` (the view at the step's training size, `factor` times smaller than full training
+// resolution per axis) and removes every distractor whose blend weight, times factor², is
+// below min_blend_weight. Returns how many were removed; nothing when the setting is 0.
+int64_t cull_idle_distractors(TrainableGaussians& view_distractors, const Camera& camera, int factor,
+                              const DistractorSettings& settings);
 
 // A view's distractor cap: static_unexplained_fraction · pixels / pixels_per_distractor
 // (rounded down; the fraction clamped to [0, 1]), with `pixels` = W·H of the view at full

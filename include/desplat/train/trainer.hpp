@@ -162,6 +162,7 @@ struct LayerPass {
 struct ViewRefinement {
   int view = 0;              // index into data.train
   int64_t before = 0, after = 0, budget = kUnlimitedGrowth;
+  int64_t idle = 0;          // culled first by the idle cull (cull_idle_distractors)
   RefineReport report;
 };
 
@@ -304,7 +305,7 @@ class Trainer {
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
-  void refine_all_distractors(int image_size, StepStats& stats);
+  void refine_all_distractors(int image_size, int factor, StepStats& stats);
   // Seeds this step's view when its latest refinement found it starved or uncovered and this
   // step's residual agrees (docs/METHOD.md §7, growth control). Returns the count added.
   int64_t seed_if_due(int view, const Camera& camera, const FloatImage& target);
