@@ -241,8 +241,9 @@ TEST(DistractorGrowth, IdleCullRemovesDistractorsHiddenOrOffScreenAndKeepsVisibl
   // 64×64 px, f = 100, threshold 1 px. A: a 20 px opaque disc at the centre, in front.
   // B: a 2 px disc (o = 0.5) right behind A, where A's T ≤ 1 − 0.999·e^(−6²/(2·20²)) ≈ 0.045,
   // so B's weight is ≤ 0.045 · 2π·4.3·0.5 ≈ 0.6 px (alone it would be ≈ 13.4 px).
-  // C: behind the camera (weight 0). D: a 3 px disc (o = 0.5) alone, off A's side:
-  // 2π·(9 + 0.3)·(0.5 − 1/255) ≈ 29 px.
+  // C: behind the camera (weight 0). D: a 3 px disc (o = 0.5) at A's depth, 34 px from the
+  // centre, where A's α is 0.999·e^(−34²/(2·20²)) ≈ 0.24: 2π·(9 + 0.3)·(0.5 − 1/255) ≈ 29 px
+  // if drawn before A, about 0.76 of that (≈ 22 px) if after: kept either way.
   TrainableGaussians g(round_distractors({{0.0f, 0.0f, 1.0f, 0.2f, 0.9999f},
                                           {0.0f, 0.0f, 2.0f, 0.04f, 0.5f},
                                           {0.0f, 0.0f, -1.0f, 0.05f, 0.9f},
