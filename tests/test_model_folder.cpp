@@ -133,7 +133,7 @@ TEST_P(ModelFolderRoundTrip, RenderReopensTheTrainedViews) {
   const std::string split_args = c.split_args + c.prepare(root.path());
   const fs::path model = root / "model", renders = root / "renders";
   const Outcome trained = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root / "scene").string() + " --out " +
-                                  model.string() + " --iterations 5 --threads 2 --downscale 1 " + split_args,
+                                  model.string() + " --iterations 5 --threads 2 --downscale 1 --effects distractors " + split_args,
                               root / "train.log");
   ASSERT_EQ(trained.exit_code, 0) << trained.output;
   // The recipe is what the model reopens from: list and .tsv files may move afterwards.

@@ -68,7 +68,7 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   // 200 distractors per view (the default density gives 16 on 64×48 images): enough that some
   // still cover their view after 120 steps, for the layer and mask checks below.
   const Outcome r = run(train() + " --out " + out.string() +
-                        " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200");
+                        " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200 --effects distractors");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("120/120"), std::string::npos) << r.output;  // plain progress lines in a pipe
   // 120 steps end inside the default resolution schedule (full resolution from step 6,000).
@@ -176,7 +176,7 @@ std::string decode_base64(const std::string& text) {
 // blank or text-only one. The page's own script records what it found on <body>.
 TEST_F(TrainApp, ReportOpensInHeadlessChromiumWithEveryImageAndPlot) {
   const fs::path out = root_ / "report_run";
-  const Outcome r = run(train() + " --out " + out.string() + " --iterations 300 --threads 2 --eval-every 100");
+  const Outcome r = run(train() + " --out " + out.string() + " --iterations 300 --threads 2 --eval-every 100 --effects distractors");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("report.html (open it in a browser)"), std::string::npos) << r.output;
   ASSERT_TRUE(fs::exists(out / "report.html"));
@@ -356,18 +356,26 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   const Outcome test_view = run(render + " --out " + (root_ / "look2").string() + " --appearance view_0.png");
   EXPECT_EQ(test_view.exit_code, 1);
   EXPECT_NE(test_view.output.find("'view_0.png' is not a training view"), std::string::npos) << test_view.output;
-  // The default is --effects auto: on this capture (one exposure) distractors only, with the
-  // evidence in the log and config.json.
+  // The default is --effects auto: this capture has one exposure, no sky and nothing that
+  // comes and goes, so nothing is added and the transient probe turns distractors off; the
+  // evidence goes to the log, config.json and metrics.json.
   const Outcome plain = run(train() + " --out " + (root_ / "no_look").string() + " --iterations 5 --threads 2");
   ASSERT_EQ(plain.exit_code, 0) << plain.output;
-  EXPECT_NE(plain.output.find("--effects auto: distractors\n"), std::string::npos) << plain.output;
-  nlohmann::json auto_config;
+  EXPECT_NE(plain.output.find("--effects auto: probing for transients"), std::string::npos) << plain.output;
+  EXPECT_NE(plain.output.find("--effects auto: none\n"), std::string::npos) << plain.output;
+  nlohmann::json auto_config, auto_metrics;
   std::ifstream(root_ / "no_look" / "config.json") >> auto_config;
-  EXPECT_EQ(auto_config["run"]["effects"], "distractors");
+  EXPECT_EQ(auto_config["run"]["effects"], "none");
   EXPECT_EQ(auto_config["run"]["effects_chosen_by"], "auto");
-  EXPECT_EQ(auto_config["run"]["effects_evidence"]["reasons"].size(), 3u);
+  const nlohmann::json& evidence = auto_config["run"]["effects_evidence"];
+  ASSERT_EQ(evidence["reasons"].size(), 3u);
+  EXPECT_EQ(evidence["reasons"][0].get<std::string>().rfind("distractors off: ", 0), 0u) << evidence["reasons"][0];
+  EXPECT_EQ(evidence["transients"]["views"].size(), auto_config["scene"]["train_views"].size());
+  EXPECT_EQ(evidence["transients"]["transients"], false);
+  std::ifstream(root_ / "no_look" / "metrics.json") >> auto_metrics;
+  EXPECT_EQ(auto_metrics["effects"]["evidence"]["transients"], evidence["transients"]);
   // … and trains exactly the model that names that set.
-  const Outcome named = run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects distractors");
+  const Outcome named = run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects none");
   ASSERT_EQ(named.exit_code, 0) << named.output;
   EXPECT_EQ(testing::slurp(root_ / "named" / "point_cloud.ply"), testing::slurp(root_ / "no_look" / "point_cloud.ply"));
   const Outcome none = run(std::string(DESPLAT_RENDER_BIN) + " --model " + (root_ / "no_look").string() + " --out " +
@@ -413,14 +421,20 @@ TEST_F(TrainApp, MetricsScoreDistractorMasksWhenTheSceneHasThem) {
 TEST_F(TrainApp, InterruptWritesCheckpointAndResumeFinishes) {
   const fs::path out = root_ / "interrupted";
   // SIGINT after 3 s of a run far too long to finish.
-  const Outcome r = run("timeout --preserve-status -s INT 3 " + train() + " --out " + out.string() + " --iterations 1000000 --threads 2");
+  // (--effects names the set, so no transient probe runs before training.)
+  const Outcome r = run("timeout --preserve-status -s INT 3 " + train() + " --out " + out.string() +
+                        " --iterations 1000000 --threads 2 --effects distractors");
   ASSERT_EQ(r.exit_code, 130) << r.output;
   EXPECT_NE(r.output.find("interrupted at step"), std::string::npos) << r.output;
   ASSERT_TRUE(fs::exists(out / "checkpoint.ckpt"));
+  // The default --effects auto resumes with the effects the model was trained with.
   const Outcome resumed = run(train() + " --out " + out.string() + " --iterations 150 --threads 2 --resume");
   // Either it resumed below 150 and finished, or the interrupted run had passed 150 already.
   ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
   EXPECT_NE(resumed.output.find("resumed from"), std::string::npos) << resumed.output;
+  EXPECT_NE(resumed.output.find("--effects auto: distractors, as this model was trained"), std::string::npos)
+      << resumed.output;
+  EXPECT_EQ(resumed.output.find("probing for transients"), std::string::npos) << resumed.output;
   EXPECT_TRUE(fs::exists(out / "metrics.json"));
 }
 

@@ -26,6 +26,7 @@
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/train/training_checkpoint.hpp"
+#include "desplat/train/transient_probe.hpp"
 
 namespace desplat {
 namespace fs = std::filesystem;
@@ -113,6 +114,18 @@ json effects_evidence_json(const EffectsEvidence& ev, const std::vector<std::str
           {"exposure_spread_stops", ev.exposure_spread_stops},
           {"white_balance_spread", ev.white_balance_spread},
           {"open_top_share", ev.open_top_share},
+          {"views", views}};
+}
+
+// The transient probe's evidence: per training view, the share of its frame in view-specific areas.
+json transient_evidence_json(const TransientEvidence& te, const TrainingData& data) {
+  json views = json::array();
+  for (size_t v = 0; v < te.view_share.size() && v < data.train.size(); ++v)
+    views.push_back({{"name", data.train[v].name}, {"view_specific_share", te.view_share[v]}});
+  return {{"reason", te.reason},
+          {"judged_views", te.judged_views},
+          {"views_with_transients", te.views_with_transients},
+          {"transients", te.transients},
           {"views", views}};
 }
 
@@ -350,14 +363,50 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   }
   const TrainingData data = load_training_data(scene);
   json effects_evidence = nullptr;
-  if (auto_effects) {
+  const json resumed_run = opt.resume ? model.read_config().run : json::object();
+  if (auto_effects && resumed_run.contains("effects")) {
+    // A resumed run continues the model it resumes, with the effects it was trained with
+    // (auto's probe is not repeated: it would take up to a minute to give the same answer).
+    Effects::parse(resumed_run.at("effects").get<std::string>()).apply(config);
+    effects_evidence = resumed_run.value("effects_evidence", json(nullptr));
+    std::printf("--effects auto: %s, as this model was trained\n", Effects::of(config).to_string().c_str());
+  } else if (auto_effects) {
     const EffectsEvidence ev = examine_effects(data);
     std::vector<std::string> why;
-    const Effects chosen = choose_effects(Effects::of(config), ev, why);
+    Effects chosen = choose_effects(Effects::of(config), ev, why);
+    json transients = nullptr;
+    if (chosen.distractors) {
+      // Distractors as configured (on by default) are kept only where a short static-only
+      // probe, with the appearance and background just chosen, finds transients.
+      Effects probe_set = chosen;
+      probe_set.distractors = false;
+      TrainConfig probe_config = config;
+      probe_set.apply(probe_config);
+      const TransientRules rules;
+      std::printf("--effects auto: probing for transients (%d static-only steps at 1/%d resolution)\n",
+                  rules.probe_steps,
+                  data.train.empty() ? 1 : probe_factor(data.train[0].camera.width, data.train[0].camera.height, rules));
+      const Stopwatch probe_clock;
+      const std::optional<TransientEvidence> probed = probe_transients(data, probe_config, rules, &stop_requested);
+      if (!probed) {
+        std::printf("interrupted during the transient probe, before training started: no checkpoint was written\n");
+        return 130;
+      }
+      const TransientEvidence& te = *probed;
+      const double probe_seconds = probe_clock.seconds();
+      chosen.distractors = te.transients;
+      why.insert(why.begin(), std::string("distractors ") + (te.transients ? "on" : "off") + ": " + te.reason);
+      transients = transient_evidence_json(te, data);
+      transients["probe_seconds"] = probe_seconds;
+      std::printf("--effects auto: the probe took %.1f s\n", probe_seconds);
+    } else {
+      why.insert(why.begin(), "distractors off: the preset and --config turn them off");
+    }
     chosen.apply(config);
     std::printf("--effects auto: %s\n", chosen.to_string().c_str());
     for (const std::string& line : why) std::printf("  %s\n", line.c_str());
     effects_evidence = effects_evidence_json(ev, why);
+    effects_evidence["transients"] = transients;
   }
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,

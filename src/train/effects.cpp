@@ -233,8 +233,6 @@ std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const Eff
 Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why) {
   Effects chosen = configured;
   chosen.appearance = configured.appearance || evidence.appearance;
-  why.push_back(std::string("distractors ") + (chosen.distractors ? "on" : "off") +
-                ": as the preset and --config set them (no test for transients before training is reliable yet)");
   why.push_back(std::string("appearance ") + (chosen.appearance ? "on" : "off") + ": " + evidence.reason +
                 (configured.appearance && !evidence.appearance ? "; on because --config turns it on" : ""));
   chosen.background = configured.background || evidence.background;

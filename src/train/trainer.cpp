@@ -164,6 +164,17 @@ const FloatImage& Trainer::target_at(int view, int factor) {
   return target_;
 }
 
+std::vector<uint8_t> downscale_keep(const std::vector<uint8_t>& keep, int width, int height, int factor) {
+  // A coarse pixel is kept only when every pixel it covers is: one that mixes in an ignored
+  // pixel (whose photo value is meaningless) is ignored too.
+  const int w = std::max(1, width / factor), h = std::max(1, height / factor);
+  std::vector<uint8_t> out(size_t(w) * h, 1);
+  for (int y = 0; y < h * factor && y < height; ++y)
+    for (int x = 0; x < w * factor && x < width; ++x)
+      if (keep[size_t(y) * width + x] == 0) out[size_t(y / factor) * w + x / factor] = 0;
+  return out;
+}
+
 std::span<const float> Trainer::keep_at(int view, int factor) {
   const std::vector<uint8_t>* mask = &data_.train[view].keep;
   if (mask->empty()) return {};
@@ -173,16 +184,8 @@ std::span<const float> Trainer::keep_at(int view, int factor) {
     if (downscaled_keep_.empty()) downscaled_keep_.resize(data_.train.size());
     auto& cache = downscaled_keep_[view];
     const Camera& cam = data_.train[view].camera;
-    while (static_cast<int>(cache.size()) <= level) {
-      // A coarse pixel is kept only when every pixel it covers is: one that mixes in an ignored
-      // pixel (whose photo value is meaningless) is ignored too.
-      const int f = 2 << cache.size(), w = std::max(1, cam.width / f), h = std::max(1, cam.height / f);
-      std::vector<uint8_t> keep(size_t(w) * h, 1);
-      for (int y = 0; y < h * f && y < cam.height; ++y)
-        for (int x = 0; x < w * f && x < cam.width; ++x)
-          if ((*mask)[size_t(y) * cam.width + x] == 0) keep[size_t(y / f) * w + x / f] = 0;
-      cache.push_back(std::move(keep));
-    }
+    while (static_cast<int>(cache.size()) <= level)
+      cache.push_back(downscale_keep(*mask, cam.width, cam.height, 2 << cache.size()));
     mask = &cache[level];
   }
   keep_.assign(mask->begin(), mask->end());

@@ -28,9 +28,9 @@ struct Effects {
 // --effects auto (docs/METHOD.md §10, choosing the effects): evidence gathered before training
 // from the SfM tracks. Every track element of a training view is a sample: the photo's colour
 // at the point's projection against the point's own colour (COLMAP's mean over its track).
-// The appearance and background models are decided from evidence, and only ever turned on:
-// distractors stay as the preset and --config set them (no test for transients before
-// training has measured reliable yet: docs/bench/issue15_effects.md).
+// The appearance and background models are decided from this evidence, and only ever turned on.
+// Transients are not (colours along tracks did not tell them apart: docs/bench/issue15_effects.md);
+// transient_probe.hpp decides distractors.
 struct EffectsRules {
   // Appearance when the views' brightness gains (the median log₂ ratio of their samples, mean
   // over RGB) spread by more than this many stops (robust standard deviation over views), or
@@ -78,8 +78,10 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& ru
 // evidence). A point of colour c looks like min(1, gain · c) in that view.
 std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules = {});
 
-// --effects auto: `configured` (the preset's and --config's set) plus appearance and
-// background when `evidence` calls for them; every line of `why` says why an effect is on or off.
+// --effects auto, appearance and background: `configured` (the preset's and --config's set) plus
+// appearance and background when `evidence` calls for them; a line of `why` for each says why it
+// is on or off. Distractors are left as configured: the caller decides them with the transient
+// probe (transient_probe.hpp), which needs the other two settled.
 Effects choose_effects(const Effects& configured, const EffectsEvidence& evidence, std::vector<std::string>& why);
 
 }  // namespace desplat

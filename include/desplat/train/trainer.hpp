@@ -336,5 +336,8 @@ void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::spa
 
 // The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
+// A user mask ([height·width], 1 = keep) at 1/factor resolution, sized as downscale_camera: a
+// coarse pixel is kept only when every pixel it covers is.
+std::vector<uint8_t> downscale_keep(const std::vector<uint8_t>& keep, int width, int height, int factor);
 
 }  // namespace desplat
