@@ -1,16 +1,21 @@
 // --effects auto's transient probe (train/transient_probe.hpp): the judgement on hand-made
 // error and depth maps whose answer is known, and the whole probe on a synthetic capture with
-// a painted transient.
+// known transients and on its clean twin.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
 
 #include "desplat/train/transient_probe.hpp"
 #include "support/expect.hpp"
-#include "support/synthetic_views.hpp"
+#include "desplat/io/scene.hpp"
+#include "desplat/jobs/training_run.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::test {
 namespace {
+namespace fs = std::filesystem;
 
 // Five cameras looking along +z at a wall at z = 5, centres 0.25 apart along x. With fx = 40
 // a wall point moves 40 · 0.25 / 5 = 2 whole pixels from one view to the next, so every pixel
@@ -76,7 +81,14 @@ TEST(TransientProbe, ANeighbourThatSeesANearerSurfaceThereDoesNotJudgeThePoint) 
   EXPECT_FLOAT_EQ(ev.view_share[3], 64.0f / (kW * kH));
   EXPECT_EQ(ev.views_with_transients, 1);
   EXPECT_FALSE(ev.transients) << "one view is not enough: " << ev.reason;
-  // Control: without the occlusion test the hidden points are judged, and view 1 counts.
+  // Nor does one that sees a farther surface there (it sees through where view 1's depth puts
+  // a surface: the point is not one surface in both).
+  std::vector<ProbeView> farther = views;
+  for (int k : {0, 2, 3, 4})
+    for (int y = 5; y < 13; ++y)
+      for (int x = 10 - 2 * (k - 1); x < 18 - 2 * (k - 1); ++x) farther[k].depth[size_t(y) * kW + x] = 8;
+  EXPECT_EQ(judge_transients(farther).view_share[1], 0.0f);
+  // Control: without the depth test the hidden points are judged, and view 1 counts.
   TransientRules no_occlusion;
   no_occlusion.depth_tolerance = 1e9f;
   ev = judge_transients(views, no_occlusion);
@@ -123,34 +135,37 @@ TEST(TransientProbe, TheProbeKeepsAtLeastMinProbeSidePixelsOnTheShortSide) {
   EXPECT_EQ(probe_factor(1920, 1080), 4);  // never beyond max_probe_factor
 }
 
-// The whole probe on a synthetic capture: a magenta square painted into two training views
-// (an object that was there for those photos only) is found in exactly those two, and the
-// unpainted capture has no transients.
-TEST(TransientProbe, FindsAPaintedObjectInTheViewsThatHoldIt) {
-  TrainingData clean = synthetic_training_data(16, 64, 48, 21);
-  TrainingData painted = clean;
-  for (size_t v : {size_t(2), size_t(7)}) {
-    ByteImage& img = painted.train[v].image;
-    for (int y = 16; y < 32; ++y)
-      for (int x = 24; x < 40; ++x) {
-        uint8_t* px = &img.pixels[3 * (size_t(y) * img.width + x)];
-        px[0] = 255, px[1] = 0, px[2] = 255;
-      }
-  }
+// The whole probe on data/synthetic/tiny_tracks.json (80×60, 21 training views, every one
+// with 1–2 objects that stay for 4 consecutive views) and on its clean twin (the same scene
+// and cameras, clutter ratio 0): transients in the first, none in the second.
+TEST(TransientProbe, FindsTheTransientsOfASyntheticCaptureAndNoneInItsCleanTwin) {
+  const fs::path dir = fs::temp_directory_path() / ("desplat_probe_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const synth::Description cluttered =
+      synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_tracks.json");
+  const synth::Description clean =
+      synth::apply_description(cluttered, nlohmann::json{{"distractors", {{"clutter_ratio", 0.0}}}}, "test");
   TrainConfig config;
   config.threads = 2;
-  TransientRules rules;
-  rules.probe_steps = 500;
-  const TransientEvidence found = probe_transients(painted, config, rules).value();
-  EXPECT_TRUE(found.transients) << found.reason;
-  for (size_t v = 0; v < painted.train.size(); ++v)
-    EXPECT_EQ(found.view_share[v] >= rules.view_share, v == 2 || v == 7) << "view " << v << ": " << found.view_share[v];
-  const TransientEvidence none = probe_transients(clean, config, rules).value();
-  EXPECT_FALSE(none.transients) << none.reason;
-  EXPECT_EQ(none.views_with_transients, 0) << none.reason;
-  // A Ctrl-C before or during the probe ends it without an answer.
-  const std::atomic<bool> stop{true};
-  EXPECT_FALSE(probe_transients(clean, config, rules, &stop).has_value());
+  std::vector<TransientEvidence> found;
+  for (const synth::Description* d : {&cluttered, &clean}) {
+    synth::GenerateOptions g;
+    g.out = dir / (d == &clean ? "clean" : "cluttered");
+    synth::generate_scene(*d, g);
+    const TrainingData data = load_training_data(load_colmap_scene(g.out, SceneOptions{}));
+    ASSERT_EQ(data.train.size(), 21u);
+    found.push_back(probe_transients(data, config).value());
+    if (d == &clean) {
+      // A Ctrl-C before or during the probe ends it without an answer.
+      const std::atomic<bool> stop{true};
+      EXPECT_FALSE(probe_transients(data, config, {}, &stop).has_value());
+    }
+  }
+  fs::remove_all(dir);
+  std::printf("cluttered: %s\nclean: %s\n", found[0].reason.c_str(), found[1].reason.c_str());
+  EXPECT_TRUE(found[0].transients) << found[0].reason;
+  EXPECT_FALSE(found[1].transients) << found[1].reason;
+  EXPECT_GT(found[0].views_with_transients, found[1].views_with_transients + 4) << found[0].reason << " / " << found[1].reason;
 }
 
 }  // namespace

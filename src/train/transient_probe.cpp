@@ -96,7 +96,9 @@ TransientEvidence judge_transients(const std::vector<ProbeView>& views, const Tr
           if (q < 0 || nu.depth[size_t(q)] <= 0 || nu.error[size_t(q)] < 0) continue;
           const Camera& c = nu.camera;
           const double zu = double(c.R_cw[6]) * X[0] + double(c.R_cw[7]) * X[1] + double(c.R_cw[8]) * X[2] + c.t_cw[2];
-          if (zu > (1.0 + rules.depth_tolerance) * nu.depth[size_t(q)]) continue;  // hidden there
+          // Judged only where u sees the same surface: nearer (hidden behind something in u)
+          // or farther (u sees through where the probe put a surface in v) says nothing.
+          if (std::fabs(zu - nu.depth[size_t(q)]) > rules.depth_tolerance * nu.depth[size_t(q)]) continue;
           seen.push_back(nu.error[size_t(q)]);
         }
         if (seen.size() >= 2 && median(seen) <= double(rules.neighbour_fraction) * rules.tolerance) specific[p] = 1;

@@ -34,7 +34,7 @@ struct TransientRules {
   float neighbour_fraction = 0.5f;
   int neighbours = 6;              // the nearest camera centres …
   float max_axis_angle_deg = 60;   // … among views whose optical axis is this close
-  float depth_tolerance = 0.1f;    // seen unoccluded: its depth ≤ (1 + this) × the neighbour's rendered depth
+  float depth_tolerance = 0.1f;    // the same surface there: its depth within this fraction of the neighbour's rendered depth
   // A connected area (4-neighbours) of view-specific pixels counts when it covers at least this
   // share of the frame: an object, not scattered misfit pixels.
   float min_area = 0.005f;
