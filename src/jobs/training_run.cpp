@@ -352,18 +352,20 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const Scene scene = load_colmap_scene(data_dir, scene_options);
   const ModelFolder model(opt.out_dir);
   const SceneRecipe recipe = SceneRecipe::of(scene, data_dir, scene_options);
+  json resumed_run = json::object();  // the resumed model's run record (config.json "run")
   if (opt.resume) {
     if (!model.has_checkpoint())
       throw std::invalid_argument("--resume: no checkpoint at " + model.checkpoint_path().string());
+    const ModelFolder::Config trained = model.read_config();
+    resumed_run = trained.run;
     // Continuing on other views or at another size would silently train another model.
-    const std::string changed = model.read_config().scene.difference(recipe);
+    const std::string changed = trained.scene.difference(recipe);
     if (!changed.empty())
       throw std::invalid_argument("--resume: the scene is not the one " + opt.out_dir.string() +
                                   " was trained on: " + changed);
   }
   const TrainingData data = load_training_data(scene);
   json effects_evidence = nullptr;
-  const json resumed_run = opt.resume ? model.read_config().run : json::object();
   if (auto_effects && resumed_run.contains("effects")) {
     // A resumed run continues the model it resumes, with the effects it was trained with
     // (auto's probe is not repeated: it would take up to a minute to give the same answer).

@@ -30,7 +30,8 @@ struct TransientRules {
   // the distractor growth rules, ResidualPenalties::tolerance) …
   float tolerance = 0.1f;
   // … and view-specific when, in addition, the median of that error over the neighbouring views
-  // that see the same surface point unoccluded is at most half the tolerance: they explain it.
+  // that see the same surface point (their depth there agrees, depth_tolerance) is at most half
+  // the tolerance: they explain it.
   float neighbour_fraction = 0.5f;
   int neighbours = 6;              // the nearest camera centres …
   float max_axis_angle_deg = 60;   // … among views whose optical axis is this close
@@ -48,7 +49,7 @@ struct TransientRules {
 struct ProbeView {
   Camera camera;
   std::vector<float> error;  // [H·W] mean |render − photo| over RGB; < 0 where not judged (a user mask)
-  std::vector<float> depth;  // [H·W] the render's depth along the optical axis; 0 where it shows no surface
+  std::vector<float> depth;  // [H·W] the render's depth along the optical axis [world units, normalized frame]; 0: no surface
 };
 
 struct TransientEvidence {
