@@ -465,6 +465,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     std::printf("transient sparse points (%s): %lld of %zu, %lld distractors seeded from them\n",
                 to_string(config.transient_points.action).c_str(), (long long)trainer.transient_point_count,
                 data.points.size(), (long long)trainer.transient_seeded);
+  if (const CameraPath& path = trainer.camera_path(); !path.empty())
+    std::printf("camera path: %zu segments between consecutive training views (%zu longer than %.2f x the median "
+                "scene depth skipped); static Gaussians within %.4f world units of it are culled\n",
+                path.from.size(), path.skipped_segments, double(config.densify.camera_path.max_segment), path.radius);
   const fs::path ckpt_path = model.checkpoint_path();
   auto save = [&] { model.write_checkpoint(trainer, {{"run", run_json}}); };
   if (opt.resume) {
@@ -570,6 +574,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   metrics["transient_points"] = {{"action", to_string(config.transient_points.action)},
                                  {"points", trainer.transient_point_count},
                                  {"seeded_distractors", trainer.transient_seeded}};
+  const CameraPath& path = trainer.camera_path();
+  metrics["camera_path"] = {{"segments", path.from.size()},
+                            {"skipped_segments", path.skipped_segments},
+                            {"median_scene_depth", path.median_depth},
+                            {"radius", path.radius},
+                            {"culled_this_run", trainer.camera_path_culled}};
   const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
   metrics["distractor_masks"] = mask_json(masks);
   if (!sfm_summary.is_null()) metrics["sfm"] = sfm_summary;

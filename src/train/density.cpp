@@ -96,7 +96,7 @@ RefineReport refine_gaussians(TrainableGaussians& g, const DensifySettings& s, i
 
 RefineReport& RefineReport::operator+=(const RefineReport& r) {
   split += r.split, duplicated += r.duplicated, culled += r.culled;
-  high_gradient += r.high_gradient, held_back += r.held_back;
+  high_gradient += r.high_gradient, held_back += r.held_back, on_camera_path += r.on_camera_path;
   for (int b = 0; b < kGradientRatioBins; ++b) gradient_ratio_bins[b] += r.gradient_ratio_bins[b];
   opacity_reset = opacity_reset || r.opacity_reset;
   ran = ran || r.ran;

@@ -35,6 +35,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stats.hide_behind_distractors = false;
     c.densify.split_screen_needs_grad = false;
     c.densify.inherit_moments = false;
+    c.densify.camera_path.radius = 0.0f;  // no camera-path cull
     c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view
     c.distractors.lambda_explained = 0.0f;
     c.distractors.lambda_owned = 0.0f;

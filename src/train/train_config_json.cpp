@@ -70,6 +70,8 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.hide_behind_distractors", &c.densify.stats.hide_behind_distractors},
       {"densify.split_screen_needs_grad", &c.densify.split_screen_needs_grad},
       {"densify.inherit_moments", &c.densify.inherit_moments},
+      {"densify.camera_path_radius", &c.densify.camera_path.radius},
+      {"densify.camera_path_max_segment", &c.densify.camera_path.max_segment},
       {"distractors.enabled", &c.distractors.enabled},
       {"distractors.initial_count", &c.distractors.initial_count},
       {"distractors.reference_pixels", &c.distractors.reference_pixels},
@@ -236,6 +238,8 @@ void validate_config(const TrainConfig& c) {
   require("densify.cull_alpha", c.densify.cull_alpha, 0, 1, false, "in [0, 1]");
   require("densify.cull_scale", c.densify.cull_scale, 0, kBig, true, "> 0");
   require("densify.cull_screen_size", c.densify.cull_screen_size, 0, kBig, true, "> 0");
+  require("densify.camera_path_radius", c.densify.camera_path.radius, 0, kBig, false, "≥ 0 (0 turns the rule off)");
+  require("densify.camera_path_max_segment", c.densify.camera_path.max_segment, 0, kBig, true, "> 0");
   require("distractors.init_depth", c.distractors.init_depth, 0, kBig, true, "> 0");
   require("distractors.init_half_width", c.distractors.init_half_width, 0, kBig, true, "> 0");
   require("distractors.init_opacity", c.distractors.init_opacity, 0, 0.999, true, "in (0, 0.999]");

@@ -110,6 +110,11 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     initial.features = fourier_features(initial.means, config_.appearance.fourier_frequencies);
   }
   gaussians_ = TrainableGaussians(std::move(initial));
+  {
+    std::vector<Camera> cameras;  // training views in name order: the capture order
+    for (const TrainView& v : data_.train) cameras.push_back(v.camera);
+    camera_path_ = desplat::camera_path(cameras, data_.points, config_.densify.camera_path);
+  }
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
     for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
@@ -123,6 +128,17 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   if (config_.background.enabled) background_ = BackgroundModel(config_.background, data_.train.size(), rng_());
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
+}
+
+void Trainer::cull_camera_path(RefineReport& report) {
+  std::vector<uint8_t> keep = on_camera_path(camera_path_, gaussians_.params.means);
+  const int64_t culled = std::count(keep.begin(), keep.end(), 1);
+  if (culled == 0) return;
+  for (uint8_t& k : keep) k = !k;
+  gaussians_.keep(keep);
+  report.on_camera_path += culled;
+  report.culled += culled;
+  camera_path_culled += culled;
 }
 
 size_t Trainer::distractor_count() const {
@@ -334,6 +350,7 @@ StepStats Trainer::step() {
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                     static_cast<int>(data_.train.size()), rng_);
+    if (stats.refine.ran && !camera_path_.empty()) cull_camera_path(stats.refine);
   });
 
   // … and the view's distractor buffer (its statistics are kept after densification stops:

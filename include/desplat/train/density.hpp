@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <random>
 
+#include "desplat/train/free_space.hpp"
 #include "desplat/train/trainable.hpp"
 
 namespace desplat {
@@ -35,6 +36,9 @@ struct DensifySettings {
   // (authors): zero moments, which with a mature bias correction make its first steps
   // about 3× the learning rate.
   bool inherit_moments = false;
+  // Ours: at each refinement also cull static Gaussians on the camera path (free_space.hpp);
+  // radius 0 (--preset paper) turns it off.
+  CameraPathSettings camera_path;
 };
 
 // The distribution of mean gradient / threshold at a refinement, in bins
@@ -45,6 +49,7 @@ struct RefineReport {
   int64_t split = 0, duplicated = 0, culled = 0;
   int64_t high_gradient = 0;        // candidates for densification (mean gradient > threshold)
   int64_t held_back = 0;            // candidates not densified because of a growth budget
+  int64_t on_camera_path = 0;       // culled for lying on the camera path (counted in culled too)
   std::array<int64_t, kGradientRatioBins> gradient_ratio_bins{};
   bool opacity_reset = false;
   bool ran = false;

@@ -266,6 +266,10 @@ class Trainer {
   // Sparse points judged transient at initialization, and the distractors seeded from them
   // (transient_points.hpp; 0 when the action is keep).
   int64_t transient_point_count = 0, transient_seeded = 0;
+  // The camera path whose free space the static refinements keep clear (free_space.hpp), and
+  // how many static Gaussians it culled in this process (not kept across a resume).
+  const CameraPath& camera_path() const { return camera_path_; }
+  int64_t camera_path_culled = 0;
   void set_step(int64_t s) { step_ = s; }
   // The latest step's pixels neither layer explains [H·W of that step's camera]; after a step
   // that seeded distractors, the eroded mask they were drawn from. For inspection.
@@ -275,6 +279,7 @@ class Trainer {
   const TrainingData& data_;
   TrainConfig config_;
   TrainableGaussians gaussians_;
+  CameraPath camera_path_;  // from the training cameras and sparse points, at construction
   std::vector<TrainableGaussians> distractors_;
   AppearanceModel appearance_;
   BackgroundModel background_;
@@ -306,6 +311,8 @@ class Trainer {
   // (built only when something is pruned).
   int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
   void refine_all_distractors(int image_size, int factor, StepStats& stats);
+  // Culls the static Gaussians on camera_path_ after a static refinement; counts them in `report`.
+  void cull_camera_path(RefineReport& report);
   // Seeds this step's view when its latest refinement found it starved or uncovered and this
   // step's residual agrees (docs/METHOD.md §7, growth control). Returns the count added.
   int64_t seed_if_due(int view, const Camera& camera, const FloatImage& target);

@@ -1,0 +1,57 @@
+// Free space along the camera path (docs/METHOD.md §7, camera path). A photographer walks the
+// camera from one photo to the next, so the space between two consecutive photos' camera
+// centres held nothing solid. A static Gaussian there is a floater: no training view sees it
+// from near (it is behind or beside them, or too close to count in their loss), yet a test
+// view taken on the same path looks straight into it.
+//
+// Units: positions in the normalized world frame (docs/METHOD.md §1); the radius and the
+// longest segment are fractions of the median scene depth, so the rule does not depend on the
+// scene's scale.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "desplat/core/camera.hpp"
+
+namespace desplat {
+
+struct CameraPathSettings {
+  // Cull static Gaussians whose centre lies within this × the median scene depth of the path.
+  // 0 turns the rule off (--preset paper). 0.08 measured best of 0.05 and 0.08: the floaters
+  // that spoil a test view also lie beside the path, where the photo between two training
+  // photos passes close to them (docs/bench/issue15_effects.md, "The camera-path cull").
+  float radius = 0.08f;
+  // Consecutive photos farther apart than this × the median scene depth are not a path the
+  // camera was walked along (an unordered collection, a gap in the capture): no segment.
+  float max_segment = 0.5f;
+};
+
+// The segments between consecutive training cameras that the rule keeps, and its radius.
+struct CameraPath {
+  std::vector<std::array<double, 3>> from, to;  // segment endpoints (camera centres) [world]
+  double radius = 0;                            // [world units]; 0: no rule
+  double median_depth = 0;                      // [world units]; 0: no points in front of any camera
+  std::size_t skipped_segments = 0;                 // consecutive pairs farther apart than max_segment
+  bool empty() const { return from.empty() || radius <= 0; }
+};
+
+// Per camera, the median depth (camera-space z) of the points in front of it (z > 0); then the
+// median of those over the cameras that have any. 0 when no camera has a point in front.
+double median_scene_depth(const std::vector<Camera>& cameras, const std::vector<std::array<float, 3>>& points);
+
+// The path through `cameras` in the order given (training views sorted by name: the capture
+// order of a phone or camera). Without points, or with settings.radius 0, the path is empty.
+CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std::array<float, 3>>& points,
+                       const CameraPathSettings& settings);
+
+// Distance from p to the segment [a, b] (b == a: to the point).
+double distance_to_segment(const std::array<double, 3>& p, const std::array<double, 3>& a,
+                           const std::array<double, 3>& b);
+
+// Per Gaussian of `means` [N·3, world], 1 when its centre lies within path.radius of a segment.
+std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means);
+
+}  // namespace desplat
