@@ -34,7 +34,9 @@ CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std
   for (size_t i = 0; i + 1 < cameras.size(); ++i) {
     const auto a = cameras[i].center(), b = cameras[i + 1].center();
     const std::array<double, 3> da{a[0], a[1], a[2]}, db{b[0], b[1], b[2]};
-    if (distance_to_segment(db, da, da) > longest) {
+    const double step = std::sqrt((db[0] - da[0]) * (db[0] - da[0]) + (db[1] - da[1]) * (db[1] - da[1]) +
+                                  (db[2] - da[2]) * (db[2] - da[2]));
+    if (step > longest) {
       ++path.skipped_segments;
       continue;
     }

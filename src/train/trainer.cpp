@@ -131,10 +131,11 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
 }
 
 void Trainer::cull_camera_path(RefineReport& report) {
-  std::vector<uint8_t> keep = on_camera_path(camera_path_, gaussians_.params.means);
-  const int64_t culled = std::count(keep.begin(), keep.end(), 1);
+  const std::vector<uint8_t> on_path = on_camera_path(camera_path_, gaussians_.params.means);
+  const int64_t culled = std::count(on_path.begin(), on_path.end(), 1);
   if (culled == 0) return;
-  for (uint8_t& k : keep) k = !k;
+  std::vector<uint8_t> keep(on_path.size());
+  for (size_t i = 0; i < on_path.size(); ++i) keep[i] = !on_path[i];
   gaussians_.keep(keep);
   report.on_camera_path += culled;
   report.culled += culled;

@@ -34,7 +34,7 @@ struct CameraPath {
   std::vector<std::array<double, 3>> from, to;  // segment endpoints (camera centres) [world]
   double radius = 0;                            // [world units]; 0: no rule
   double median_depth = 0;                      // [world units]; 0: no points in front of any camera
-  std::size_t skipped_segments = 0;                 // consecutive pairs farther apart than max_segment
+  std::size_t skipped_segments = 0;             // consecutive pairs farther apart than max_segment
   bool empty() const { return from.empty() || radius <= 0; }
 };
 
