@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   app.add_option("--preset", o.preset,
                  "starting settings: fast (a 3,000-step preview), default (what measures best, 30,000 steps) "
-                 "or paper (the authors' exact behaviour); --config and --iterations apply on top")
+                 "or paper (the authors' exact behaviour); --config and --iterations apply on top. Default: default "
+                 "(with --resume: the settings the model was trained with)")
       ->check(CLI::IsMember(desplat::preset_names()));
   app.add_option("--iterations", o.iterations, "training steps (default 30000)")
       ->check(desplat::apps::integer_in(1, INT64_MAX));
@@ -51,7 +52,9 @@ int main(int argc, char** argv) {
   app.add_flag("--no-distractor-density", o.no_distractor_density,
                "ablation: never split/duplicate/cull distractors");
   app.add_flag("--no-regularization", o.no_regularization, "ablation: drop the two opacity regularizers");
-  app.add_flag("--resume", o.resume, "continue from --out/checkpoint.ckpt");
+  app.add_flag("--resume", o.resume,
+               "continue from --out/checkpoint.ckpt with the settings in --out/config.json; only --iterations "
+               "(to train longer) and --threads may change them");
   app.add_flag("--overwrite", o.overwrite,
                "replace an earlier run's outputs in --out (config.json, checkpoint.ckpt, metrics.json, "
                "point_cloud.ply, renders/); without it such a folder is refused");

@@ -389,7 +389,10 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   EXPECT_NE(none.output.find("was trained without an appearance or background model"), std::string::npos) << none.output;
   const Outcome resume = run(train() + " --out " + out.string() + " --iterations 80 --threads 2 --resume --effects distractors");
   EXPECT_EQ(resume.exit_code, 1);
-  EXPECT_NE(resume.output.find("trained with the appearance model but this run has it off"), std::string::npos)
+  // The recorded settings are checked before the checkpoint is opened (restore_training_checkpoint's
+  // own refusal is tested in test_appearance.cpp).
+  EXPECT_NE(resume.output.find("changes 1 of them: appearance.enabled false (true in " + (out / "config.json").string()),
+            std::string::npos)
       << resume.output;
 }
 
@@ -441,6 +444,58 @@ TEST_F(TrainApp, InterruptWritesCheckpointAndResumeFinishes) {
       << resumed.output;
   EXPECT_EQ(resumed.output.find("probing for transients"), std::string::npos) << resumed.output;
   EXPECT_TRUE(fs::exists(out / "metrics.json"));
+}
+
+// --resume continues with the settings config.json records: a run started with --preset fast
+// and resumed without it goes on as fast (resolution_schedule 1000 against the default's
+// 3000), a resume naming other settings is refused with each difference named and nothing
+// written, and one naming the same settings goes through.
+TEST_F(TrainApp, ResumeKeepsTheTrainedSettingsAndRefusesOtherOnes) {
+  const fs::path out = root_ / "resume_settings";
+  const std::string first = train() + " --out " + out.string() + " --threads 2 --effects distractors --preset fast";
+  ASSERT_EQ(run(first + " --iterations 20").exit_code, 0);
+  auto recorded = [&] {
+    nlohmann::json c;
+    std::ifstream(out / "config.json") >> c;
+    return c;
+  };
+  ASSERT_EQ(recorded()["train"]["resolution_schedule"], 1000);
+  const std::string checkpoint_before = desplat::testing::slurp(out / "checkpoint.ckpt");
+
+  const Outcome refused = run(train() + " --out " + out.string() + " --resume --iterations 40 --preset paper");
+  EXPECT_EQ(refused.exit_code, 1) << refused.output;
+  EXPECT_NE(refused.output.find("--resume continues the model with the settings it was trained with"), std::string::npos)
+      << refused.output;
+  EXPECT_NE(refused.output.find("resolution_schedule 3000 (1000 in " + (out / "config.json").string() + ")"),
+            std::string::npos)
+      << refused.output;
+  EXPECT_NE(refused.output.find(" more. Resume without settings options"), std::string::npos) << refused.output;
+  // One setting changed by a config file on top of the first run's preset: exactly that one.
+  const fs::path one_change = root_ / "radius_005.json";
+  write_file_atomically(one_change, R"({"densify": {"camera_path_radius": 0.05}})");
+  const Outcome one = run(first + " --resume --iterations 40 --config " + one_change.string());
+  EXPECT_EQ(one.exit_code, 1) << one.output;
+  EXPECT_NE(one.output.find("changes 1 of them: densify.camera_path_radius 0.05 (0.08 in " +
+                            (out / "config.json").string() + ")."),
+            std::string::npos)
+      << one.output;
+  EXPECT_NE(refused.output.find("started with --preset fast and effects distractors"), std::string::npos)
+      << refused.output;
+  EXPECT_EQ(refused.output.find("iterations 40"), std::string::npos) << refused.output;  // may change
+  EXPECT_EQ(desplat::testing::slurp(out / "checkpoint.ckpt"), checkpoint_before);
+  EXPECT_EQ(recorded()["train"]["iterations"], 20);
+
+  const Outcome resumed = run(train() + " --out " + out.string() + " --resume --iterations 40");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("resumed from"), std::string::npos) << resumed.output;
+  EXPECT_NE(resumed.output.find("at step 20"), std::string::npos) << resumed.output;
+  EXPECT_EQ(recorded()["train"]["resolution_schedule"], 1000);
+  EXPECT_EQ(recorded()["train"]["iterations"], 40);
+  EXPECT_EQ(recorded()["run"]["preset"], "fast");
+
+  const Outcome same = run(first + " --resume --iterations 50");
+  ASSERT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_NE(same.output.find("at step 40"), std::string::npos) << same.output;
 }
 
 TEST_F(TrainApp, NoTestViewsIsSaidNotScoredAsZero) {

@@ -278,6 +278,45 @@ json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
           {"views", views}};
 }
 
+namespace {
+
+// --resume continues the model with the settings it was trained with (`trained_with`, from
+// config.json): a forgotten --preset or --config must not silently train the rest of the run
+// differently. The length of the run, the threads and the kernels' instruction set may change
+// (the last two move results by float rounding at most); they come from the command line or
+// config file when named there. Any other setting named there (`asked` is what it gives) must
+// agree with the record, or the resume is refused naming every setting that differs.
+TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfig& asked, const TrainingRunOptions& opt,
+                               const json& config_file, const json& resumed_run, const fs::path& record) {
+  const bool settings_named = opt.preset || !opt.config_file.empty() || (opt.effects && *opt.effects != "auto") ||
+                              opt.seed || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
+                              opt.no_regularization;
+  if (settings_named) {
+    const std::vector<std::string> differ = config_differences(effective_config(asked), trained_with, record.string(),
+                                                               {"iterations", "threads", "kernel_isa"});
+    if (!differ.empty()) {
+      // The first few name the problem; all of them would bury it when a preset differs.
+      const size_t shown = std::min<size_t>(differ.size(), 6);
+      std::string list;
+      for (size_t i = 0; i < shown; ++i) list += (list.empty() ? "" : "; ") + differ[i];
+      if (shown < differ.size()) list += "; and " + std::to_string(differ.size() - shown) + " more";
+      throw std::invalid_argument("--resume continues the model with the settings it was trained with, and this "
+                                  "command changes " + std::to_string(differ.size()) + " of them: " + list +
+                                  ". Resume without settings options (the run was started with --preset " +
+                                  resumed_run.value("preset", std::string("default")) + " and effects " +
+                                  resumed_run.value("effects", std::string("unrecorded")) +
+                                  "), or start again with --overwrite to train with new ones");
+    }
+  }
+  TrainConfig out = trained_with;
+  if (opt.iterations || config_file.contains("iterations")) out.iterations = asked.iterations;
+  if (opt.threads || config_file.contains("threads")) out.threads = asked.threads;
+  if (config_file.contains("kernel_isa")) out.kernel_isa = asked.kernel_isa;
+  return out;
+}
+
+}  // namespace
+
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
   if (opt.resume && opt.overwrite) throw std::invalid_argument("--resume and --overwrite contradict each other");
   if (!opt.resume) {
@@ -310,11 +349,12 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     data_dir = sfm_options.out;
   }
 
-  TrainConfig config = preset_config(opt.preset);
+  const std::string preset = opt.preset.value_or("default");
+  TrainConfig config = preset_config(preset);
+  json j = json::object();  // the config file's settings
   if (!opt.config_file.empty()) {
     std::ifstream f(opt.config_file);
     if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
-    json j;
     try {
       f >> j;
     } catch (const json::exception& e) {
@@ -335,7 +375,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.static_only) config.distractors.enabled = false;
   // --effects defaults to auto; --static-only means none, and --preset paper keeps the
   // authors' set (distractors only) unless --effects says otherwise.
-  const std::string effects = opt.effects.value_or(opt.static_only ? "none" : opt.preset == "paper" ? "" : "auto");
+  const std::string effects = opt.effects.value_or(opt.static_only ? "none" : preset == "paper" ? "" : "auto");
   const bool auto_effects = effects == "auto";
   if (!effects.empty() && !auto_effects) Effects::parse(effects).apply(config);
   if (opt.distractors_per_view) {
@@ -353,11 +393,13 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const ModelFolder model(opt.out_dir);
   const SceneRecipe recipe = SceneRecipe::of(scene, data_dir, scene_options);
   json resumed_run = json::object();  // the resumed model's run record (config.json "run")
+  std::optional<TrainConfig> trained_with;  // --resume: the settings the model was trained with
   if (opt.resume) {
     if (!model.has_checkpoint())
       throw std::invalid_argument("--resume: no checkpoint at " + model.checkpoint_path().string());
     const ModelFolder::Config trained = model.read_config();
     resumed_run = trained.run;
+    trained_with = trained.train;
     // Continuing on other views or at another size would silently train another model.
     const std::string changed = trained.scene.difference(recipe);
     if (!changed.empty())
@@ -410,6 +452,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     effects_evidence = effects_evidence_json(ev, why);
     effects_evidence["transients"] = transients;
   }
+  if (trained_with) config = settings_to_resume(*trained_with, config, opt, j, resumed_run, model.config_path());
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());
@@ -452,7 +495,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 config.background.image_dim, config.background.hidden_layers, config.background.hidden_width,
                 config.background.sh_degree, config.appearance.test_steps);
   const json run_json = {{"static_only", opt.static_only},
-                         {"preset", opt.preset},
+                         {"preset", resumed_run.value("preset", preset)},
                          {"effects", Effects::of(config).to_string()},
                          {"effects_chosen_by", auto_effects ? "auto" : "the command line and preset"},
                          {"effects_evidence", effects_evidence}};

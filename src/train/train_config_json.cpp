@@ -2,7 +2,9 @@
 // in exactly one place.
 #include "desplat/train/train_config_json.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -259,6 +261,27 @@ nlohmann::json config_to_json(const TrainConfig& c) {
   nlohmann::json j = nlohmann::json::object();
   for (const Entry& e : fields(copy)) std::visit([&](auto* p) { j[pointer(e.name)] = *p; }, e.field);
   return j;
+}
+
+std::vector<std::string> config_differences(const TrainConfig& a, const TrainConfig& b, const std::string& b_name,
+                                            const std::vector<std::string>& ignore) {
+  const nlohmann::json ja = config_to_json(a), jb = config_to_json(b);
+  // Settings are float32: 7 significant digits show them as written (0.08, not 0.0799999982).
+  auto show = [](const nlohmann::json& v) {
+    if (!v.is_number_float()) return v.dump();
+    char text[32];
+    std::snprintf(text, sizeof text, "%.7g", v.get<double>());
+    return std::string(text);
+  };
+  TrainConfig names_only;
+  std::vector<std::string> out;
+  for (const Entry& e : fields(names_only)) {
+    if (std::find(ignore.begin(), ignore.end(), e.name) != ignore.end()) continue;
+    const auto ptr = pointer(e.name);
+    if (ja.at(ptr) != jb.at(ptr))
+      out.push_back(std::string(e.name) + " " + show(ja.at(ptr)) + " (" + show(jb.at(ptr)) + " in " + b_name + ")");
+  }
+  return out;
 }
 
 TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {

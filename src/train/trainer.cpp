@@ -56,6 +56,13 @@ Camera downscale_camera(const Camera& c, int factor) {
   return out;
 }
 
+TrainConfig effective_config(TrainConfig config) {
+  // Transient points are DeSplat's: without distractors the model is the Splatfacto
+  // baseline (--static-only, the bench's static-only runs) and starts from every point.
+  if (!config.distractors.enabled) config.transient_points.action = TransientPointAction::keep;
+  return config;
+}
+
 Trainer::Trainer(const TrainingData& data, TrainConfig config)
     : data_(data), config_(std::move(config)), rng_(config_.seed) {
   // Adam, the loss and the initialization are plain `omp parallel` loops: without this a
@@ -94,9 +101,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   };
   for (const TrainView& v : data_.train) check_size(v, coarsest, "training");
   for (const TrainView& v : data_.test) check_size(v, 1, "test");
-  // Transient points are DeSplat's: without distractors the model is the Splatfacto
-  // baseline (--static-only, the bench's static-only runs) and starts from every point.
-  if (!config_.distractors.enabled) config_.transient_points.action = TransientPointAction::keep;
+  config_ = effective_config(std::move(config_));
   std::vector<uint8_t> transient;
   if (config_.transient_points.action != TransientPointAction::keep) {
     transient = transient_points(data_, config_.transient_points);

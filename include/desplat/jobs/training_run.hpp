@@ -29,7 +29,9 @@ struct TrainingRunOptions {
   std::filesystem::path data_dir;    // images/ + sparse/0/
   std::filesystem::path images_dir;  // instead of data_dir: run SfM on a folder of photos
   std::filesystem::path out_dir;
-  std::string preset = "default";    // presets.hpp; the config file applies on top of it
+  // presets.hpp; the config file applies on top of it. Unset: "default" (on --resume: the
+  // settings the model was trained with).
+  std::optional<std::string> preset;
   std::filesystem::path config_file; // JSON overrides of TrainConfig
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
@@ -44,6 +46,9 @@ struct TrainingRunOptions {
   std::optional<int> distractors_per_view;
   bool no_distractor_density = false;
   bool no_regularization = false;
+  // Continue out_dir's checkpoint with the settings its config.json records. Only the length
+  // of the run (iterations) and threads and kernel_isa (float rounding at most) may change;
+  // any other setting given here must agree with the record, or the resume is refused.
   bool resume = false;
   // A fresh run into a folder that holds an earlier run's outputs is refused (it would
   // overwrite that model's checkpoint and leave its renders mixed with the new ones) unless

@@ -208,6 +208,11 @@ struct ViewMetrics {
   ViewLook look;  // appearance_halves: the fitted embeddings (render the view in its look)
 };
 
+// The configuration a Trainer built from `config` trains with (what config.json records):
+// without distractors the model is the Splatfacto baseline and starts from every sparse
+// point, so the transient-point action is keep.
+TrainConfig effective_config(TrainConfig config);
+
 class Trainer {
  public:
   // `data` must outlive the trainer.
