@@ -26,8 +26,12 @@ int main(int argc, char** argv) {
                  "folder of masks, one PNG per photo named like it (0002.jpg.png or 0002.png), black = ignore "
                  "the pixel in training and metrics (default: the scene's masks/ folder when it exists)");
   app.add_option("--out", o.out_dir, "output folder")->required();
-  app.add_option("--config", o.config_file, "JSON file overriding training settings (see config.json of any run)")
-      ->check(CLI::ExistingFile);
+  app.add_option("--config", o.config,
+                 "JSON file overriding training settings (see config.json of any run), or the JSON itself: "
+                 "--config '{\"num_downscales\": 0}'")
+      ->check(CLI::Validator(
+          [](const std::string& v) { return !v.empty() && v.front() == '{' ? std::string() : CLI::ExistingFile(v); },
+          "FILE|JSON"));
   app.add_option("--preset", o.preset,
                  "starting settings: fast (a 3,000-step preview), default (what measures best, 30,000 steps) "
                  "or paper (the authors' exact behaviour); --config and --iterations apply on top. Default: default "

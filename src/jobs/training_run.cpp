@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/checkpoint.hpp"
@@ -288,7 +289,7 @@ namespace {
 // agree with the record, or the resume is refused naming every setting that differs.
 TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfig& asked, const TrainingRunOptions& opt,
                                const json& config_file, const json& resumed_run, const fs::path& record) {
-  const bool settings_named = opt.preset || !opt.config_file.empty() || (opt.effects && *opt.effects != "auto") ||
+  const bool settings_named = opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") ||
                               opt.seed || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
                               opt.no_regularization;
   if (settings_named) {
@@ -352,18 +353,24 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   const std::string preset = opt.preset.value_or("default");
   TrainConfig config = preset_config(preset);
   json j = json::object();  // the config file's settings
-  if (!opt.config_file.empty()) {
-    std::ifstream f(opt.config_file);
-    if (!f) throw std::invalid_argument("cannot read config file " + opt.config_file.string());
+  if (!opt.config.empty()) {
+    const bool inline_text = opt.config.front() == '{';
+    const std::string source = inline_text ? "--config text" : "config file " + opt.config;
+    std::string text = opt.config;
+    if (!inline_text) {
+      std::ifstream f(opt.config);
+      if (!f) throw std::invalid_argument("cannot read config file " + opt.config);
+      text.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    }
     try {
-      f >> j;
+      j = json::parse(text);
     } catch (const json::exception& e) {
-      throw std::invalid_argument("config file " + opt.config_file.string() + " is not valid JSON: " + e.what());
+      throw std::invalid_argument(source + " is not valid JSON: " + e.what());
     }
     try {
       config = config_from_json(j, config);
     } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(opt.config_file.string() + ": " + e.what());
+      throw std::invalid_argument(source + ": " + e.what());
     }
   }
   if (opt.iterations) config.iterations = *opt.iterations;

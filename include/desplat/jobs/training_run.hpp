@@ -32,7 +32,9 @@ struct TrainingRunOptions {
   // presets.hpp; the config file applies on top of it. Unset: "default" (on --resume: the
   // settings the model was trained with).
   std::optional<std::string> preset;
-  std::filesystem::path config_file; // JSON overrides of TrainConfig
+  // JSON overrides of TrainConfig: a file's path, or the JSON text itself when it starts with '{'
+  // (desplat_train --config '{"num_downscales": 0}').
+  std::string config;
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
   std::optional<int> threads;
