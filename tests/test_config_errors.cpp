@@ -3,7 +3,10 @@
 // rates and sizes). The defaults and both presets are valid.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cctype>
 #include <limits>
+#include <set>
 
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
@@ -85,6 +88,25 @@ TEST(ConfigErrors, NonFiniteValuesAreRefusedWhateverTheSetting) {
   c.distractors.lambda_distractor = std::numeric_limits<float>::infinity();
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { validate_config(c); }),
                   "distractors.lambda_distractor must be ≥ 0 (got inf)");
+}
+
+// A config.json written before some settings existed: exactly the missing ones are named.
+TEST(ConfigErrors, SettingsAbsentFromAnOlderFileAreNamed) {
+  nlohmann::json j = config_to_json(TrainConfig{});
+  EXPECT_TRUE(settings_absent_from(j).empty());
+  j["densify"].erase("camera_path_radius");
+  j["lr"].erase("means");
+  EXPECT_EQ(settings_absent_from(j), (std::vector<std::string>{"lr.means", "densify.camera_path_radius"}));
+  // An empty file lacks every setting config.json writes: one per leaf (an array is one setting).
+  const nlohmann::json flat = config_to_json(TrainConfig{}).flatten();
+  std::set<std::string> leaves;
+  for (const auto& [path, value] : flat.items()) {
+    const size_t last = path.rfind('/');
+    const std::string tail = path.substr(last + 1);
+    const bool array_element = !tail.empty() && std::all_of(tail.begin(), tail.end(), ::isdigit);
+    leaves.insert(array_element ? path.substr(0, last) : path);
+  }
+  EXPECT_EQ(settings_absent_from(nlohmann::json::object()).size(), leaves.size());
 }
 
 }  // namespace

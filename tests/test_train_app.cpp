@@ -496,6 +496,19 @@ TEST_F(TrainApp, ResumeKeepsTheTrainedSettingsAndRefusesOtherOnes) {
   const Outcome same = run(first + " --resume --iterations 50");
   ASSERT_EQ(same.exit_code, 0) << same.output;
   EXPECT_NE(same.output.find("at step 40"), std::string::npos) << same.output;
+  EXPECT_EQ(same.output.find("records no value"), std::string::npos) << same.output;
+
+  // A config.json from a build before a setting existed: the resume says which it defaults.
+  nlohmann::json older = recorded();
+  older["train"]["densify"].erase("camera_path_radius");
+  write_file_atomically(out / "config.json", older.dump(2));
+  const Outcome old_file = run(train() + " --out " + out.string() + " --resume --iterations 60");
+  ASSERT_EQ(old_file.exit_code, 0) << old_file.output;
+  EXPECT_NE(old_file.output.find("warning: " + (out / "config.json").string() +
+                                 " records no value for 1 setting (densify.camera_path_radius)"),
+            std::string::npos)
+      << old_file.output;
+  EXPECT_TRUE(recorded()["train"]["densify"].contains("camera_path_radius"));  // written back
 }
 
 TEST_F(TrainApp, NoTestViewsIsSaidNotScoredAsZero) {

@@ -144,6 +144,7 @@ ModelFolder::Config ModelFolder::read_config() const {
   Config c;
   try {
     c.train = config_from_json(j.at("train"));
+    c.unrecorded_settings = settings_absent_from(j.at("train"));
     c.run = j.value("run", json::object());
     if (j.contains("scene")) {
       c.scene = SceneRecipe::from_json(j.at("scene"));

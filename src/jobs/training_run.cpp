@@ -407,6 +407,16 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     const ModelFolder::Config trained = model.read_config();
     resumed_run = trained.run;
     trained_with = trained.train;
+    if (!trained.unrecorded_settings.empty()) {
+      // Said before anything trains: the rest of the run uses today's defaults for them.
+      const std::vector<std::string>& missing = trained.unrecorded_settings;
+      std::string names;
+      for (size_t i = 0; i < std::min<size_t>(missing.size(), 6); ++i) names += (i ? ", " : "") + missing[i];
+      if (missing.size() > 6) names += " and " + std::to_string(missing.size() - 6) + " more";
+      std::printf("warning: %s records no value for %zu setting%s (%s): it was written by an older desplat, and the "
+                  "resumed run uses today's defaults for them\n",
+                  model.config_path().c_str(), missing.size(), missing.size() == 1 ? "" : "s", names.c_str());
+    }
     // Continuing on other views or at another size would silently train another model.
     const std::string changed = trained.scene.difference(recipe);
     if (!changed.empty())
@@ -510,7 +520,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   // The trainer's configuration is the effective one (e.g. a static-only model keeps every
   // sparse point): that is what config.json records.
   config = trainer.config();
-  model.write_config({config, recipe, run_json});
+  model.write_config({config, recipe, run_json, {}});
   if (config.transient_points.action != TransientPointAction::keep)
     std::printf("transient sparse points (%s): %lld of %zu, %lld distractors seeded from them\n",
                 to_string(config.transient_points.action).c_str(), (long long)trainer.transient_point_count,

@@ -284,6 +284,14 @@ std::vector<std::string> config_differences(const TrainConfig& a, const TrainCon
   return out;
 }
 
+std::vector<std::string> settings_absent_from(const nlohmann::json& j) {
+  TrainConfig names_only;
+  std::vector<std::string> out;
+  for (const Entry& e : fields(names_only))
+    if (!j.is_object() || !j.contains(pointer(e.name))) out.push_back(e.name);
+  return out;
+}
+
 TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
   if (!j.is_object()) throw std::invalid_argument("config: the top level must be a JSON object");
   std::vector<std::string> leaves;

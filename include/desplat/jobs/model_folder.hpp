@@ -60,6 +60,9 @@ class ModelFolder {
     TrainConfig train;
     SceneRecipe scene;
     nlohmann::json run = nlohmann::json::object();
+    // Settings the file's "train" lacks (written by a build before they existed); `train`
+    // holds today's defaults for them.
+    std::vector<std::string> unrecorded_settings;
   };
   void write_config(const Config& config) const;  // atomically
   // Throws when the file is missing, not JSON, or lacks the recipe. A config.json from before

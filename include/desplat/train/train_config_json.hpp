@@ -21,6 +21,10 @@ TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base = {});
 std::vector<std::string> config_differences(const TrainConfig& a, const TrainConfig& b, const std::string& b_name,
                                             const std::vector<std::string>& ignore = {});
 
+// The settings (names as in the JSON) that `j` does not hold, in the table's order: reading
+// `j` gives them their defaults (a config.json written before they existed).
+std::vector<std::string> settings_absent_from(const nlohmann::json& j);
+
 // Throws std::invalid_argument "config: <setting> must be <what is allowed> (got <value>)"
 // for the first setting out of its range: counts and intervals that would divide by zero,
 // rates that would make the run useless, NaN/Inf anywhere.
