@@ -281,6 +281,15 @@ json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
 
 namespace {
 
+// The first `shown` items joined by `separator`, then "and N more": a long list of settings
+// would bury the first ones, which name the problem.
+std::string first_items(const std::vector<std::string>& items, size_t shown, const std::string& separator) {
+  std::string out;
+  for (size_t i = 0; i < std::min(items.size(), shown); ++i) out += (i ? separator : "") + items[i];
+  if (items.size() > shown) out += separator + "and " + std::to_string(items.size() - shown) + " more";
+  return out;
+}
+
 // --resume continues the model with the settings it was trained with (`trained_with`, from
 // config.json): a forgotten --preset or --config must not silently train the rest of the run
 // differently. The length of the run, the threads and the kernels' instruction set may change
@@ -288,7 +297,7 @@ namespace {
 // config file when named there. Any other setting named there (`asked` is what it gives) must
 // agree with the record, or the resume is refused naming every setting that differs.
 TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfig& asked, const TrainingRunOptions& opt,
-                               const json& config_file, const json& resumed_run, const fs::path& record) {
+                               const json& config_overrides, const json& resumed_run, const fs::path& record) {
   const bool settings_named = opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") ||
                               opt.seed || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
                               opt.no_regularization;
@@ -296,11 +305,7 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
     const std::vector<std::string> differ = config_differences(effective_config(asked), trained_with, record.string(),
                                                                {"iterations", "threads", "kernel_isa"});
     if (!differ.empty()) {
-      // The first few name the problem; all of them would bury it when a preset differs.
-      const size_t shown = std::min<size_t>(differ.size(), 6);
-      std::string list;
-      for (size_t i = 0; i < shown; ++i) list += (list.empty() ? "" : "; ") + differ[i];
-      if (shown < differ.size()) list += "; and " + std::to_string(differ.size() - shown) + " more";
+      const std::string list = first_items(differ, 6, "; ");
       throw std::invalid_argument("--resume continues the model with the settings it was trained with, and this "
                                   "command changes " + std::to_string(differ.size()) + " of them: " + list +
                                   ". Resume without settings options (the run was started with --preset " +
@@ -310,9 +315,9 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
     }
   }
   TrainConfig out = trained_with;
-  if (opt.iterations || config_file.contains("iterations")) out.iterations = asked.iterations;
-  if (opt.threads || config_file.contains("threads")) out.threads = asked.threads;
-  if (config_file.contains("kernel_isa")) out.kernel_isa = asked.kernel_isa;
+  if (opt.iterations || config_overrides.contains("iterations")) out.iterations = asked.iterations;
+  if (opt.threads || config_overrides.contains("threads")) out.threads = asked.threads;
+  if (config_overrides.contains("kernel_isa")) out.kernel_isa = asked.kernel_isa;
   return out;
 }
 
@@ -352,7 +357,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
 
   const std::string preset = opt.preset.value_or("default");
   TrainConfig config = preset_config(preset);
-  json j = json::object();  // the config file's settings
+  json j = json::object();  // the --config settings (file or text)
   if (!opt.config.empty()) {
     const bool inline_text = opt.config.front() == '{';
     const std::string source = inline_text ? "--config text" : "config file " + opt.config;
@@ -410,12 +415,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     if (!trained.unrecorded_settings.empty()) {
       // Said before anything trains: the rest of the run uses today's defaults for them.
       const std::vector<std::string>& missing = trained.unrecorded_settings;
-      std::string names;
-      for (size_t i = 0; i < std::min<size_t>(missing.size(), 6); ++i) names += (i ? ", " : "") + missing[i];
-      if (missing.size() > 6) names += " and " + std::to_string(missing.size() - 6) + " more";
       std::printf("warning: %s records no value for %zu setting%s (%s): it was written by an older desplat, and the "
                   "resumed run uses today's defaults for them\n",
-                  model.config_path().c_str(), missing.size(), missing.size() == 1 ? "" : "s", names.c_str());
+                  model.config_path().c_str(), missing.size(), missing.size() == 1 ? "" : "s",
+                  first_items(missing, 6, ", ").c_str());
     }
     // Continuing on other views or at another size would silently train another model.
     const std::string changed = trained.scene.difference(recipe);
