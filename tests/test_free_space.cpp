@@ -5,6 +5,8 @@
 #include <cmath>
 #include <random>
 
+#include <Eigen/Dense>
+
 #include "desplat/train/free_space.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
@@ -29,6 +31,31 @@ TEST(FreeSpace, DistanceToASegmentByHand) {
   EXPECT_DOUBLE_EQ(distance_to_segment({3, 1, 0}, a, b), std::sqrt(2.0));  // past the end: to b
   EXPECT_DOUBLE_EQ(distance_to_segment({-3, 0, 4}, a, b), 5.0);            // before the start: to a
   EXPECT_DOUBLE_EQ(distance_to_segment({0, 3, 4}, a, a), 5.0);             // a point segment
+}
+
+// Σ + r²·I is diagonal in the Gaussian's frame, so the distance is worked out by hand: a
+// Gaussian at (0, 0.3, 0) beside the segment from (−1, 0, 0) to (1, 0, 0), long along x.
+TEST(FreeSpace, TubeMahalanobisByHand) {
+  const std::array<double, 3> a{-1, 0, 0}, b{1, 0, 0};
+  const double r = 0.1;
+  const float log_scale[3] = {std::log(0.5f), std::log(0.02f), std::log(0.03f)};
+  const float identity[4] = {1, 0, 0, 0};
+  const double sx2 = 0.25, sy2 = 0.02 * 0.02;
+  // The scales arrive as float logarithms: 1e-6 relative is their rounding, not slack.
+  const auto near = [](double got, double want) { EXPECT_NEAR(got, want, 1e-6 * want); };
+  // Beside the middle: the closest point is straight across, along the short y axis.
+  near(tube_mahalanobis2({0, 0.3, 0}, a, b, log_scale, identity, r), 0.09 / (sy2 + r * r));
+  // The same Gaussian turned 90° about z: its long axis now points at the segment.
+  const float turned[4] = {float(std::cos(M_PI / 4)), 0, 0, float(std::sin(M_PI / 4))};
+  near(tube_mahalanobis2({0, 0.3, 0}, a, b, log_scale, turned, r), 0.09 / (sx2 + r * r));
+  // Past the end, on the axis: the closest point is b, 1 away along the long axis.
+  near(tube_mahalanobis2({2, 0, 0}, a, b, log_scale, identity, r), 1.0 / (sx2 + r * r));
+  // A quaternion need not be normalized.
+  const float scaled[4] = {2 * turned[0], 0, 0, 2 * turned[3]};
+  near(tube_mahalanobis2({0, 0.3, 0}, a, b, log_scale, scaled, r), 0.09 / (sx2 + r * r));
+  // A vanishing Gaussian is the centre rule: distance² / r².
+  const float tiny[3] = {-30, -30, -30};
+  near(tube_mahalanobis2({0.5, 0.3, 0.4}, a, b, tiny, turned, r), 0.25 / (r * r));
 }
 
 TEST(FreeSpace, MedianSceneDepthIsTheMedianOverCamerasOfEachCamerasMedian) {
@@ -105,49 +132,121 @@ TEST(FreeSpace, CullMaskMatchesBruteForceOverEverySegment) {
   EXPECT_LT(hits, 2900);
 }
 
+// With by_extent the mask is min over each segment of (x − μ)ᵀ(Σ + r²I)⁻¹(x − μ) ≤ 1, here
+// against a brute force that builds Σ with Eigen and samples each segment.
+TEST(FreeSpace, ExtentMaskMatchesBruteForceOverEverySegment) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<Camera> cams;
+  for (int i = 0; i < 12; ++i) cams.push_back(camera_at(0.1 * i * std::cos(i), 0.1 * i * std::sin(i), 0.05 * i));
+  std::vector<std::array<float, 3>> points;
+  for (int i = 0; i < 50; ++i) points.push_back({u(rng), u(rng), 4 + u(rng)});
+  CameraPathSettings s;
+  s.radius = 0.05f;
+  s.by_extent = true;
+  const CameraPath path = camera_path(cams, points, s);
+  ASSERT_FALSE(path.empty());
+  ASSERT_TRUE(path.by_extent);
+  std::vector<float> means, log_scales, quats;
+  for (int i = 0; i < 1500; ++i) {
+    means.insert(means.end(), {0.5f * u(rng), 0.5f * u(rng), 0.3f + 0.5f * u(rng)});
+    // Needles and discs up to 0.3 long, at any orientation.
+    for (int k = 0; k < 3; ++k) log_scales.push_back(std::log(0.3f) + 2.5f * (u(rng) - 1));
+    quats.insert(quats.end(), {u(rng), u(rng), u(rng), u(rng)});
+  }
+  const std::vector<uint8_t> on = on_camera_path(path, means, log_scales, quats);
+  const std::vector<uint8_t> by_centre = on_camera_path(CameraPath{path.from, path.to, path.radius, false}, means);
+  int hits = 0, beyond_centre_rule = 0;
+  for (size_t i = 0; i < on.size(); ++i) {
+    Eigen::Quaterniond q(quats[4 * i], quats[4 * i + 1], quats[4 * i + 2], quats[4 * i + 3]);
+    const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
+    Eigen::Vector3d var;
+    for (int k = 0; k < 3; ++k) var[k] = std::exp(2.0 * log_scales[3 * i + k]);
+    const Eigen::Matrix3d M =
+        (R * var.asDiagonal() * R.transpose() + path.radius * path.radius * Eigen::Matrix3d::Identity()).inverse();
+    const Eigen::Vector3d p(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    double best = 1e30;
+    for (size_t k = 0; k < path.from.size(); ++k) {
+      const Eigen::Vector3d a(path.from[k].data()), b(path.to[k].data());
+      for (int t = 0; t <= 2000; ++t) {
+        const Eigen::Vector3d d = a + (b - a) * (t / 2000.0) - p;
+        best = std::min(best, d.dot(M * d));
+      }
+    }
+    if (std::abs(best - 1.0) < 2e-3) continue;  // too close to the border to judge by sampling
+    EXPECT_EQ(on[i], best < 1.0 ? 1 : 0) << "Gaussian " << i << " at Mahalanobis² " << best;
+    hits += on[i];
+    beyond_centre_rule += on[i] && !by_centre[i];
+    EXPECT_TRUE(on[i] || !by_centre[i]) << i;  // the centre rule's hits are a subset
+  }
+  EXPECT_GT(hits, 20);
+  EXPECT_LT(hits, 1400);
+  EXPECT_GT(beyond_centre_rule, 5);  // the extent reaches the path from outside the tube
+  EXPECT_THROW(on_camera_path(path, means), std::invalid_argument);  // extent without scales
+}
+
 // A floater planted halfway between two consecutive training cameras goes at the first
 // refinement; the scene's Gaussians (all within 0.35 of the origin, cameras at radius 1) stay.
+// A needle whose centre lies 2 radii beside the path but which reaches across it (scale 0.2
+// along the way to the path) goes too when judged by extent, and stays when judged by centre.
 TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
   const TrainingData data = test::synthetic_training_data(16, 64, 48, 5);  // 12 training views
-  TrainConfig cfg = test::short_schedule(30);
-  cfg.distractors.enabled = false;
-  cfg.densify.warmup = 10;        // refinements at steps 20 and 30 …
-  cfg.densify.refine_every = 10;
-  cfg.densify.stop_split_at = 0;  // … that cull only: the count moves by culls alone
-  Trainer t(data, cfg);
-  const CameraPath& path = t.camera_path();
-  ASSERT_FALSE(path.empty());
-  // Training views 1, 2, 3, 5, 6, 7, 9, …, 15 at radius 1, depth about 1: the 8 steps between
-  // neighbours (0.39 apart) are kept, the 3 across a test view (0.77 apart) skipped.
-  EXPECT_EQ(path.from.size(), 8u);
-  EXPECT_EQ(path.skipped_segments, 3u);
-  const auto a = data.train[0].camera.center(), b = data.train[1].camera.center();
-  GaussianSet floater = copy_rows(t.gaussians().params, std::vector<uint8_t>(t.gaussians().size(), 0));
-  floater.resize(1);
-  for (int k = 0; k < 3; ++k) floater.means[k] = 0.5f * (a[k] + b[k]), floater.log_scales[k] = std::log(0.02f);
-  floater.quats[0] = 1;
-  floater.opacity_logits[0] = 3.0f;  // opaque: the opacity cull would not take it
-  t.mutable_gaussians().append(floater);
-  const size_t before = t.gaussians().size();
-  auto floaters = [&] {
-    int n = 0;
-    for (size_t i = 0; i < t.gaussians().size(); ++i) {
-      const std::array<double, 3> p{t.gaussians().params.means[3 * i], t.gaussians().params.means[3 * i + 1],
-                                    t.gaussians().params.means[3 * i + 2]};
-      n += distance_to_segment(p, {a[0], a[1], a[2]}, {b[0], b[1], b[2]}) < path.radius;
+  for (const bool by_extent : {false, true}) {
+    SCOPED_TRACE(by_extent ? "by extent" : "by centre");
+    TrainConfig cfg = test::short_schedule(30);
+    cfg.distractors.enabled = false;
+    cfg.densify.warmup = 10;        // refinements at steps 20 and 30 …
+    cfg.densify.refine_every = 10;
+    cfg.densify.stop_split_at = 0;  // … that cull only: the count moves by culls alone
+    cfg.densify.camera_path.by_extent = by_extent;
+    Trainer t(data, cfg);
+    const CameraPath& path = t.camera_path();
+    ASSERT_FALSE(path.empty());
+    // Training views 1, 2, 3, 5, 6, 7, 9, …, 15 at radius 1, depth about 1: the 8 steps between
+    // neighbours (0.39 apart) are kept, the 3 across a test view (0.77 apart) skipped.
+    EXPECT_EQ(path.from.size(), 8u);
+    EXPECT_EQ(path.skipped_segments, 3u);
+    const auto a = data.train[0].camera.center(), b = data.train[1].camera.center();
+    const Eigen::Vector3d mid = 0.5 * (Eigen::Vector3d(a[0], a[1], a[2]) + Eigen::Vector3d(b[0], b[1], b[2]));
+    const Eigen::Vector3d inward = -mid.normalized();  // cameras on a circle about the origin
+    GaussianSet planted = copy_rows(t.gaussians().params, std::vector<uint8_t>(t.gaussians().size(), 0));
+    planted.resize(2);
+    const Eigen::Vector3d needle_at = mid + 2 * path.radius * inward;
+    // The needle's long axis (local x) turned onto `inward`.
+    const Eigen::Quaternionf turn =
+        Eigen::Quaternionf::FromTwoVectors(Eigen::Vector3f::UnitX(), inward.cast<float>());
+    for (int k = 0; k < 3; ++k) {
+      planted.means[k] = float(mid[k]), planted.log_scales[k] = std::log(0.02f);
+      planted.means[3 + k] = float(needle_at[k]), planted.log_scales[3 + k] = std::log(k == 0 ? 0.2f : 0.01f);
     }
-    return n;
-  };
-  EXPECT_EQ(floaters(), 1);
-  int64_t on_path = 0, culled = 0;
-  while (t.current_step() < 30) {
-    const StepStats s = t.step();
-    on_path += s.refine.on_camera_path, culled += s.refine.culled;
+    planted.quats[0] = 1;
+    planted.quats[4] = turn.w(), planted.quats[5] = turn.x(), planted.quats[6] = turn.y(), planted.quats[7] = turn.z();
+    planted.opacity_logits[0] = planted.opacity_logits[1] = 3.0f;  // opaque: the opacity cull would not take them
+    t.mutable_gaussians().append(planted);
+    const size_t before = t.gaussians().size();
+    auto near_path = [&](double within) {
+      int n = 0;
+      for (size_t i = 0; i < t.gaussians().size(); ++i) {
+        const std::array<double, 3> p{t.gaussians().params.means[3 * i], t.gaussians().params.means[3 * i + 1],
+                                      t.gaussians().params.means[3 * i + 2]};
+        n += distance_to_segment(p, {a[0], a[1], a[2]}, {b[0], b[1], b[2]}) < within;
+      }
+      return n;
+    };
+    EXPECT_EQ(near_path(path.radius), 1);      // the floater
+    EXPECT_EQ(near_path(3 * path.radius), 2);  // and the needle
+    int64_t on_path = 0, culled = 0;
+    while (t.current_step() < 30) {
+      const StepStats s = t.step();
+      on_path += s.refine.on_camera_path, culled += s.refine.culled;
+    }
+    const int expected = by_extent ? 2 : 1;
+    EXPECT_EQ(near_path(path.radius), 0);
+    EXPECT_EQ(near_path(3 * path.radius), 2 - expected);
+    EXPECT_EQ(on_path, expected);
+    EXPECT_EQ(t.camera_path_culled, expected);
+    EXPECT_EQ(int64_t(before - t.gaussians().size()), culled);  // nothing added, culls only
   }
-  EXPECT_EQ(floaters(), 0);
-  EXPECT_EQ(on_path, 1);
-  EXPECT_EQ(t.camera_path_culled, 1);
-  EXPECT_EQ(int64_t(before - t.gaussians().size()), culled);  // nothing added, culls only
 }
 
 TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
@@ -161,6 +260,7 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_radius", 0.05}}}}).densify.camera_path.radius, 0.05f);
   EXPECT_EQ(preset_config("paper").densify.camera_path.radius, 0.0f);
   EXPECT_EQ(preset_config("default").densify.camera_path.radius, 0.08f);
+  EXPECT_TRUE(config_from_json({{"densify", {{"camera_path_by_extent", true}}}}).densify.camera_path.by_extent);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "desplat/core/statistics.hpp"
 
@@ -30,6 +31,7 @@ CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std
   path.median_depth = median_scene_depth(cameras, points);
   if (!(path.median_depth > 0)) return path;
   path.radius = settings.radius * path.median_depth;
+  path.by_extent = settings.by_extent;
   const double longest = settings.max_segment * path.median_depth;
   for (size_t i = 0; i + 1 < cameras.size(); ++i) {
     const auto a = cameras[i].center(), b = cameras[i + 1].center();
@@ -61,24 +63,65 @@ double distance_to_segment(const std::array<double, 3>& p, const std::array<doub
   return std::sqrt(dist2);
 }
 
-std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means) {
+double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a,
+                         const std::array<double, 3>& b, const float* log_scale, const float* quat, double r) {
+  // In the Gaussian's own frame (columns of R) Σ + r²·I is diagonal: s_k² + r².
+  double qn = 0;
+  for (int k = 0; k < 4; ++k) qn += double(quat[k]) * quat[k];
+  qn = qn > 0 ? std::sqrt(qn) : 1.0;
+  const double w = quat[0] / qn, x = quat[1] / qn, y = quat[2] / qn, z = quat[3] / qn;
+  const double R[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                          {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                          {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+  double inv_var[3];
+  for (int k = 0; k < 3; ++k) inv_var[k] = 1.0 / (std::exp(2.0 * double(log_scale[k])) + r * r);
+  // f(t) = |L(a − p + t·(b − a))|² with L = diag(inv_var)^½ Rᵀ: a quadratic in t, minimized on [0, 1].
+  double u[3] = {0, 0, 0}, v[3] = {0, 0, 0};  // Rᵀ(a − p), Rᵀ(b − a)
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j) {
+      u[k] += R[j][k] * (a[j] - p[j]);
+      v[k] += R[j][k] * (b[j] - a[j]);
+    }
+  double uv = 0, vv = 0;
+  for (int k = 0; k < 3; ++k) uv += inv_var[k] * u[k] * v[k], vv += inv_var[k] * v[k] * v[k];
+  const double t = vv > 0 ? std::clamp(-uv / vv, 0.0, 1.0) : 0.0;
+  double f = 0;
+  for (int k = 0; k < 3; ++k) f += inv_var[k] * (u[k] + t * v[k]) * (u[k] + t * v[k]);
+  return f;
+}
+
+std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means,
+                                    const std::vector<float>& log_scales, const std::vector<float>& quats) {
   const size_t n = means.size() / 3;
   std::vector<uint8_t> out(n, 0);
   if (path.empty()) return out;
-  // Each segment's box grown by the radius: most Gaussians are far from every segment.
+  if (path.by_extent && (log_scales.size() != 3 * n || quats.size() != 4 * n))
+    throw std::invalid_argument("on_camera_path: judging by extent needs every Gaussian's scales and rotation");
+  // Each segment's box, grown per Gaussian by how far its test can reach: the radius, or with
+  // by_extent √(r² + s_max²) (Σ + r²·I ≤ (s_max² + r²)·I). Most Gaussians are far from every segment.
   std::vector<std::array<double, 6>> boxes(path.from.size());
   for (size_t s = 0; s < boxes.size(); ++s)
     for (int k = 0; k < 3; ++k) {
-      boxes[s][k] = std::min(path.from[s][k], path.to[s][k]) - path.radius;
-      boxes[s][3 + k] = std::max(path.from[s][k], path.to[s][k]) + path.radius;
+      boxes[s][k] = std::min(path.from[s][k], path.to[s][k]);
+      boxes[s][3 + k] = std::max(path.from[s][k], path.to[s][k]);
     }
 #pragma omp parallel for schedule(static)
   for (long long i = 0; i < (long long)n; ++i) {
     const std::array<double, 3> p{means[3 * i], means[3 * i + 1], means[3 * i + 2]};
+    double reach = path.radius;
+    if (path.by_extent) {
+      const double s_max = std::exp(double(std::max({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]})));
+      reach = std::sqrt(path.radius * path.radius + s_max * s_max);
+    }
     for (size_t s = 0; s < boxes.size(); ++s) {
       const auto& box = boxes[s];
-      if (p[0] < box[0] || p[1] < box[1] || p[2] < box[2] || p[0] > box[3] || p[1] > box[4] || p[2] > box[5]) continue;
-      if (distance_to_segment(p, path.from[s], path.to[s]) <= path.radius) {
+      if (p[0] < box[0] - reach || p[1] < box[1] - reach || p[2] < box[2] - reach || p[0] > box[3] + reach ||
+          p[1] > box[4] + reach || p[2] > box[5] + reach)
+        continue;
+      const bool on = path.by_extent ? tube_mahalanobis2(p, path.from[s], path.to[s], &log_scales[3 * i],
+                                                         &quats[4 * i], path.radius) <= 1.0
+                                     : distance_to_segment(p, path.from[s], path.to[s]) <= path.radius;
+      if (on) {
         out[size_t(i)] = 1;
         break;
       }

@@ -74,6 +74,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.inherit_moments", &c.densify.inherit_moments},
       {"densify.camera_path_radius", &c.densify.camera_path.radius},
       {"densify.camera_path_max_segment", &c.densify.camera_path.max_segment},
+      {"densify.camera_path_by_extent", &c.densify.camera_path.by_extent},
       {"distractors.enabled", &c.distractors.enabled},
       {"distractors.initial_count", &c.distractors.initial_count},
       {"distractors.reference_pixels", &c.distractors.reference_pixels},

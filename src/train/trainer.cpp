@@ -136,7 +136,8 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
 }
 
 void Trainer::cull_camera_path(RefineReport& report) {
-  const std::vector<uint8_t> on_path = on_camera_path(camera_path_, gaussians_.params.means);
+  const GaussianSet& g = gaussians_.params;
+  const std::vector<uint8_t> on_path = on_camera_path(camera_path_, g.means, g.log_scales, g.quats);
   const int64_t culled = std::count(on_path.begin(), on_path.end(), 1);
   if (culled == 0) return;
   std::vector<uint8_t> keep(on_path.size());

@@ -27,12 +27,19 @@ struct CameraPathSettings {
   // Consecutive photos farther apart than this × the median scene depth are not a path the
   // camera was walked along (an unordered collection, a gap in the capture): no segment.
   float max_segment = 0.5f;
+  // Judge a Gaussian by its extent, not its centre alone: it is on the path when the path comes
+  // within one standard deviation of it in the metric of Σ + r²·I (its covariance with the
+  // tube's radius r added in every direction). A point-sized Gaussian is the centre rule; a
+  // large one whose centre lies just outside the tube but which sprawls across it (a sky
+  // floater painting clouds for far views) is on the path too (docs/METHOD.md §7).
+  bool by_extent = false;
 };
 
 // The segments between consecutive training cameras that the rule keeps, and its radius.
 struct CameraPath {
   std::vector<std::array<double, 3>> from, to;  // segment endpoints (camera centres) [world]
   double radius = 0;                            // [world units]; 0: no rule
+  bool by_extent = false;                       // CameraPathSettings::by_extent
   double median_depth = 0;                      // [world units]; 0: no points in front of any camera
   std::size_t skipped_segments = 0;             // consecutive pairs farther apart than max_segment
   bool empty() const { return from.empty() || radius <= 0; }
@@ -51,7 +58,16 @@ CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std
 double distance_to_segment(const std::array<double, 3>& p, const std::array<double, 3>& a,
                            const std::array<double, 3>& b);
 
-// Per Gaussian of `means` [N·3, world], 1 when its centre lies within path.radius of a segment.
-std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means);
+// min over x in [a, b] of (x − p)ᵀ (Σ + r²·I)⁻¹ (x − p), with Σ = R·diag(exp(2·log_scale))·Rᵀ
+// and R the rotation of `quat` (w, x, y, z; normalized here). With scales → 0 it is
+// distance_to_segment(p, a, b)² / r².
+double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a,
+                         const std::array<double, 3>& b, const float* log_scale, const float* quat, double r);
+
+// Per Gaussian of `means` [N·3, world], 1 when it is on the path: its centre within path.radius
+// of a segment, or with path.by_extent (then `log_scales` [N·3] and `quats` [N·4] are needed)
+// tube_mahalanobis2 ≤ 1 for a segment.
+std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means,
+                                    const std::vector<float>& log_scales = {}, const std::vector<float>& quats = {});
 
 }  // namespace desplat
