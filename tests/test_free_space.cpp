@@ -75,6 +75,7 @@ TEST(FreeSpace, PathKeepsShortStepsBetweenConsecutiveCamerasOnly) {
   const std::vector<std::array<float, 3>> points{{0, 0, 10}, {4, 0, 10}, {9, 0, 10}, {30, 0, 10}};
   const std::vector<Camera> cams{camera_at(0, 0, 0), camera_at(4, 0, 0), camera_at(30, 0, 0), camera_at(33, 0, 0)};
   CameraPathSettings s;
+  s.by_extent = false;  // the centre rule
   s.radius = 0.05f, s.max_segment = 0.5f;
   const CameraPath path = camera_path(cams, points, s);
   EXPECT_NEAR(path.median_depth, 10.0, 1e-9);
@@ -103,6 +104,7 @@ TEST(FreeSpace, CullMaskMatchesBruteForceOverEverySegment) {
   std::vector<std::array<float, 3>> points;
   for (int i = 0; i < 50; ++i) points.push_back({u(rng), u(rng), 4 + u(rng)});
   CameraPathSettings s;
+  s.by_extent = false;  // the centre rule
   s.radius = 0.08f;
   const CameraPath path = camera_path(cams, points, s);
   ASSERT_FALSE(path.empty());
@@ -260,6 +262,7 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_radius", 0.05}}}}).densify.camera_path.radius, 0.05f);
   EXPECT_EQ(preset_config("paper").densify.camera_path.radius, 0.0f);
   EXPECT_EQ(preset_config("default").densify.camera_path.radius, 0.08f);
+  EXPECT_FALSE(preset_config("default").densify.camera_path.by_extent);
   EXPECT_TRUE(config_from_json({{"densify", {{"camera_path_by_extent", true}}}}).densify.camera_path.by_extent);
 }
 

@@ -31,7 +31,9 @@ struct CameraPathSettings {
   // within one standard deviation of it in the metric of Σ + r²·I (its covariance with the
   // tube's radius r added in every direction). A point-sized Gaussian is the centre rule; a
   // large one whose centre lies just outside the tube but which sprawls across it (a sky
-  // floater painting clouds for far views) is on the path too (docs/METHOD.md §7).
+  // floater painting clouds for far views) is on the path too (docs/METHOD.md §7). Off: it
+  // gained on one sky scene of four and lost a little on the other three
+  // (docs/bench/issue15_effects.md, "The camera-path cull by extent").
   bool by_extent = false;
 };
 
