@@ -25,6 +25,17 @@ Camera camera_at(double x, double y, double z) {
   return c;
 }
 
+// `count` cameras on a rising spiral before 50 random points about z = 4: the path the
+// brute-force tests judge Gaussians against.
+CameraPath spiral_path(int count, const CameraPathSettings& s, std::mt19937& rng) {
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<Camera> cams;
+  for (int i = 0; i < count; ++i) cams.push_back(camera_at(0.1 * i * std::cos(i), 0.1 * i * std::sin(i), 0.05 * i));
+  std::vector<std::array<float, 3>> points;
+  for (int i = 0; i < 50; ++i) points.push_back({u(rng), u(rng), 4 + u(rng)});
+  return camera_path(cams, points, s);
+}
+
 TEST(FreeSpace, DistanceToASegmentByHand) {
   const std::array<double, 3> a{0, 0, 0}, b{2, 0, 0};
   EXPECT_DOUBLE_EQ(distance_to_segment({1, 1, 0}, a, b), 1.0);           // beside the middle
@@ -99,14 +110,10 @@ TEST(FreeSpace, PathKeepsShortStepsBetweenConsecutiveCamerasOnly) {
 TEST(FreeSpace, CullMaskMatchesBruteForceOverEverySegment) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(-1, 1);
-  std::vector<Camera> cams;
-  for (int i = 0; i < 20; ++i) cams.push_back(camera_at(0.1 * i * std::cos(i), 0.1 * i * std::sin(i), 0.05 * i));
-  std::vector<std::array<float, 3>> points;
-  for (int i = 0; i < 50; ++i) points.push_back({u(rng), u(rng), 4 + u(rng)});
   CameraPathSettings s;
   s.by_extent = false;  // the centre rule
   s.radius = 0.08f;
-  const CameraPath path = camera_path(cams, points, s);
+  const CameraPath path = spiral_path(20, s, rng);
   ASSERT_FALSE(path.empty());
   std::vector<float> means;
   for (int i = 0; i < 3000; ++i) means.insert(means.end(), {0.4f * u(rng), 0.4f * u(rng), 0.6f + 0.6f * u(rng)});
@@ -139,14 +146,10 @@ TEST(FreeSpace, CullMaskMatchesBruteForceOverEverySegment) {
 TEST(FreeSpace, ExtentMaskMatchesBruteForceOverEverySegment) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(-1, 1);
-  std::vector<Camera> cams;
-  for (int i = 0; i < 12; ++i) cams.push_back(camera_at(0.1 * i * std::cos(i), 0.1 * i * std::sin(i), 0.05 * i));
-  std::vector<std::array<float, 3>> points;
-  for (int i = 0; i < 50; ++i) points.push_back({u(rng), u(rng), 4 + u(rng)});
   CameraPathSettings s;
   s.radius = 0.05f;
   s.by_extent = true;
-  const CameraPath path = camera_path(cams, points, s);
+  const CameraPath path = spiral_path(12, s, rng);
   ASSERT_FALSE(path.empty());
   ASSERT_TRUE(path.by_extent);
   std::vector<float> means, log_scales, quats;
