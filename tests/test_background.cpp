@@ -354,5 +354,52 @@ TEST(Background, ResumeIsBitExactAndMismatchesAreRefused) {
                   "3 hidden layers of 16 and SH degree 4; this run asks for 32, 3 of 32 and 4");
 }
 
+// The shared embedding (background.share_appearance_embedding, the default) against an
+// independent expectation: with the appearance MLP frozen at its start (last layer zero, so it
+// leaves every colour unchanged and sends no gradient to the embedding), the background reading
+// the appearance embedding must train bit for bit as a background that owns a copy of it. Then
+// the shared run's own background embeddings never move, a test view's fitted look is one
+// vector for both, and resuming is refused across the two forms.
+TEST(Background, TheSharedEmbeddingTrainsAsTheBackgroundsOwnCopyWould) {
+  const TrainingData data = sky_views(23);
+  TrainConfig shared = short_schedule(150);
+  shared.distractors.enabled = false;
+  shared.background.enabled = shared.appearance.enabled = true;
+  shared.background.hidden_width = 16;
+  shared.appearance.hidden_width = 16;
+  shared.appearance.lr_mlp = 0.0f;  // frozen: the appearance path adds nothing
+  shared.appearance.test_steps = 5;
+  TrainConfig own = shared;
+  own.background.share_appearance_embedding = false;
+  Trainer a(data, shared), b(data, own);
+  ASSERT_TRUE(a.shared_embedding());
+  ASSERT_FALSE(b.shared_embedding());
+  const std::vector<float> unused = a.background().image_embeddings;
+  b.mutable_background().image_embeddings = b.appearance().image_embeddings;  // the same start
+  for (int i = 0; i < 150; ++i) a.step(), b.step();
+  EXPECT_NE(a.appearance().image_embeddings, b.appearance().image_embeddings) << "the sky moved the shared one";
+  EXPECT_EQ(a.appearance().image_embeddings, b.background().image_embeddings);
+  EXPECT_EQ(a.background().mlp, b.background().mlp);
+  EXPECT_EQ(a.gaussians().params.colors, b.gaussians().params.colors);
+  EXPECT_EQ(a.background().image_embeddings, unused);
+  for (const ViewMetrics& m : a.evaluate({data.test[0]})) {
+    EXPECT_EQ(m.look.background, m.look.appearance);
+    EXPECT_EQ(m.look.background.size(), size_t(shared.background.image_dim));
+  }
+
+  const std::filesystem::path file =
+      std::filesystem::temp_directory_path() / ("desplat_shared_embedding_" + std::to_string(::getpid()) + ".ckpt");
+  write_checkpoint(file, make_training_checkpoint(a));
+  const Checkpoint ckpt = read_checkpoint(file);
+  std::filesystem::remove(file);
+  Trainer other(data, own);
+  EXPECT_CONTAINS(testing::error_of<CheckpointError>([&] { restore_training_checkpoint(other, ckpt); }),
+                  "reads the appearance embeddings; this run's would read its own");
+  TrainConfig narrow = shared;
+  narrow.background.image_dim = 8;
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(data, narrow); }),
+                  "background.image_dim (8) must equal appearance.image_dim (32)");
+}
+
 }  // namespace
 }  // namespace desplat::test

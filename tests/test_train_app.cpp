@@ -327,6 +327,24 @@ TEST_F(TrainApp, BackgroundModelRendersOverAPhotosOwnBackground) {
   EXPECT_NE(read_image_rgb(root_ / "sky_plain" / "view_1.png").pixels, single.pixels);
 }
 
+// Appearance and background together: the background reads the appearance embedding (the
+// default, the authors' form), the checkpoint says so, and desplat_render --appearance draws
+// the training figure's static column exactly, sky included.
+TEST_F(TrainApp, SharedEmbeddingRendersAsTheTrainerDrewIt) {
+  const fs::path out = root_ / "both";
+  const Outcome r =
+      run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,appearance,background");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json config;
+  std::ifstream(out / "config.json") >> config;
+  EXPECT_EQ(config["train"]["background"]["share_appearance_embedding"], true);
+  const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
+  const Outcome ok = run(render + " --out " + (root_ / "both_look").string() + " --views view_1.png --appearance view_1.png");
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  expect_static_column(read_image_rgb(out / "renders" / "train" / "view_1.png"),
+                       read_image_rgb(root_ / "both_look" / "view_1.png"));
+}
+
 // --effects distractors,appearance: the run says which protocol scored the test views, and
 // desplat_render --appearance NAME (from the checkpoint) draws the static layer exactly as the
 // trainer drew it in NAME's figure row (renders/train, the view's own embedding).

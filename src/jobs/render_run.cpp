@@ -99,6 +99,12 @@ int run_render(const RenderRunOptions& o) {
       sky = background_from_checkpoint(ckpt);
       const std::span<const float> e = sky.embedding(index);
       sky_embedding.assign(e.begin(), e.end());
+      if (sky.settings.share_appearance_embedding) {  // the authors' form
+        if (embedding.empty())
+          throw CheckpointError(o.model_dir.string() +
+                                ": its background model reads the appearance embeddings, but the model has none");
+        sky_embedding = embedding;
+      }
     }
   }
   AppearancePass look_pass;

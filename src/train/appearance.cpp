@@ -23,9 +23,12 @@ void AppearanceSettings::validate() const {
   positive(hidden_width, "hidden_width");
   positive(hidden_layers, "hidden_layers");
   positive(test_steps, "test_steps");
-  for (auto [v, name] : {std::pair{lr_mlp, "lr_mlp"}, std::pair{lr_image, "lr_image"}, std::pair{test_lr, "test_lr"}})
-    if (!(v > 0 && std::isfinite(v)))
-      throw std::invalid_argument(std::string("appearance.") + name + " must be a positive number (got " + std::to_string(v) + ")");
+  // A training rate of 0 freezes its group, as everywhere (train_config_json's rule).
+  for (auto [v, name] : {std::pair{lr_mlp, "lr_mlp"}, std::pair{lr_image, "lr_image"}})
+    if (!(v >= 0 && std::isfinite(v)))
+      throw std::invalid_argument(std::string("appearance.") + name + " must be ≥ 0 (got " + std::to_string(v) + ")");
+  if (!(test_lr > 0 && std::isfinite(test_lr)))
+    throw std::invalid_argument("appearance.test_lr must be a positive number (got " + std::to_string(test_lr) + ")");
 }
 
 std::vector<float> fourier_features(std::span<const float> means, int frequencies) {

@@ -116,6 +116,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"appearance.test_lr", &c.appearance.test_lr},
       {"background.enabled", &c.background.enabled},
       {"background.image_dim", &c.background.image_dim},
+      {"background.share_appearance_embedding", &c.background.share_appearance_embedding},
       {"background.hidden_width", &c.background.hidden_width},
       {"background.hidden_layers", &c.background.hidden_layers},
       {"background.sh_degree", &c.background.sh_degree},

@@ -131,6 +131,10 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   }
   if (config_.appearance.enabled) appearance_ = AppearanceModel(config_.appearance, data_.train.size(), rng_());
   if (config_.background.enabled) background_ = BackgroundModel(config_.background, data_.train.size(), rng_());
+  if (shared_embedding() && config_.background.image_dim != config_.appearance.image_dim)
+    throw std::invalid_argument("background.image_dim (" + std::to_string(config_.background.image_dim) +
+                                ") must equal appearance.image_dim (" + std::to_string(config_.appearance.image_dim) +
+                                ") while background.share_appearance_embedding is on");
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
 }
@@ -215,6 +219,14 @@ std::span<const float> Trainer::keep_at(int view, int factor) {
   return keep_;
 }
 
+bool Trainer::shared_embedding() const {
+  return config_.background.share_appearance_embedding && config_.appearance.enabled && config_.background.enabled;
+}
+
+std::span<const float> Trainer::sky_embedding(size_t view) const {
+  return shared_embedding() ? appearance_.embedding(view) : background_.embedding(view);
+}
+
 // The rows Adam updates this step: the Gaussians the rasterizer found visible (the only ones
 // with a gradient), or every row (empty span) when selective Adam is off.
 std::span<const uint8_t> Trainer::adam_rows(const RasterOutput& forward) const {
@@ -253,7 +265,7 @@ StepStats Trainer::step() {
   const bool learned_bg = config_.background.enabled;
   if (learned_bg)
     profile.time(&StepTimings::background, [&] {
-      background_pass_.forward(background_, background_.embedding(size_t(view)), cam,
+      background_pass_.forward(background_, sky_embedding(size_t(view)), cam,
                                config_.background.sh_degree_at(step_), config_.threads);
     });
   const Background bg = learned_bg ? background_pass_.background() : Background(bg_color);
@@ -316,22 +328,25 @@ StepStats Trainer::step() {
   profile.timings.forward -= appearance_forward;
   profile.timings.backward -= static_pass_.appearance_seconds - appearance_forward;
   profile.timings.appearance += static_pass_.appearance_seconds;
+  const bool shared = shared_embedding();
+  if (learned_bg)
+    profile.time(&StepTimings::background, [&] {
+      background_pass_.backward(background_, sky_embedding(size_t(view)), cam, config_.threads);
+      const size_t dim = size_t(config_.background.image_dim);
+      d_embeddings_.assign(background_.image_embeddings.size(), 0.0f);
+      if (!shared) std::copy_n(background_pass_.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
+      if (!background_.adam_update(background_pass_.d_mlp, d_embeddings_))
+        warn("step " + std::to_string(step_) + ": the background model's gradient is not finite; its update was skipped");
+    });
   if (look)
     profile.time(&StepTimings::appearance, [&] {
       const size_t dim = size_t(config_.appearance.image_dim);
       d_embeddings_.assign(appearance_.image_embeddings.size(), 0.0f);
       std::copy_n(static_pass_.appearance.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
+      if (shared)
+        for (size_t k = 0; k < dim; ++k) d_embeddings_[size_t(view) * dim + k] += background_pass_.d_embedding[k];
       if (!appearance_.adam_update(static_pass_.appearance.d_mlp, d_embeddings_))
         warn("step " + std::to_string(step_) + ": the appearance model's gradient is not finite; its update was skipped");
-    });
-  if (learned_bg)
-    profile.time(&StepTimings::background, [&] {
-      background_pass_.backward(background_, background_.embedding(size_t(view)), cam, config_.threads);
-      const size_t dim = size_t(config_.background.image_dim);
-      d_embeddings_.assign(background_.image_embeddings.size(), 0.0f);
-      std::copy_n(background_pass_.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
-      if (!background_.adam_update(background_pass_.d_mlp, d_embeddings_))
-        warn("step " + std::to_string(step_) + ": the background model's gradient is not finite; its update was skipped");
     });
   if (distractors)
     profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
@@ -555,7 +570,8 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     for (size_t j = 0; j < appearance_.views(); ++j)
       for (size_t k = 0; k < dim; ++k) look.appearance[k] += appearance_.embedding(j)[k] / float(appearance_.views());
   }
-  if (sky) look.background = background_.mean_embedding();
+  const bool shared = shared_embedding();
+  if (sky) look.background = shared ? look.appearance : background_.mean_embedding();
   std::vector<float> m_a(look.appearance.size(), 0.0f), v_a(m_a), m_b(look.background.size(), 0.0f), v_b(m_b);
   const RasterSettings rs = raster_settings();
   const int bg_degree = config_.background.sh_degree_at(step_);
@@ -578,14 +594,17 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
                               {pass.d_color, pass.d_alpha, {}, {}, sky_pass.d_image});
     const double bc1 = 1.0 - std::pow(double(adam.beta1), step);
     const float step_size = float(as.test_lr / bc1), sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
+    if (sky) sky_pass.backward(background_, look.background, cam, config_.threads);
     if (recolor) {
       pass.backward(gaussians_, cam, rs, &appearance_, look.appearance);
-      const std::vector<float>& grad = pass.appearance.d_embedding;
+      std::vector<float>& grad = pass.appearance.d_embedding;
+      if (shared)  // one embedding: the background's gradient joins the appearance's
+        for (size_t k = 0; k < grad.size(); ++k) grad[k] += sky_pass.d_embedding[k];
       if (!finite(grad)) break;
       adam_span(look.appearance.data(), m_a.data(), v_a.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
+      if (shared) look.background = look.appearance;
     }
-    if (sky) {
-      sky_pass.backward(background_, look.background, cam, config_.threads);
+    if (sky && !shared) {
       const std::vector<float>& grad = sky_pass.d_embedding;
       if (!finite(grad)) break;
       adam_span(look.background.data(), m_b.data(), v_b.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
@@ -605,7 +624,7 @@ ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>&
   const Camera& camera = data_.train.at(train_view).camera;
   BackgroundPass sky;
   if (config_.background.enabled)  // and over its own background
-    sky.forward(background_, background_.embedding(train_view), camera, config_.background.sh_degree_at(step_),
+    sky.forward(background_, sky_embedding(train_view), camera, config_.background.sh_degree_at(step_),
                 config_.threads);
   const Background bg = config_.background.enabled ? sky.background() : Background(background);
   return render_view_layers(gaussians_.params, d, camera, raster_settings(), bg, recolor);

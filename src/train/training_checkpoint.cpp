@@ -127,6 +127,7 @@ Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extr
                                 {"hidden_width", bs.hidden_width},
                                 {"hidden_layers", bs.hidden_layers},
                                 {"sh_degree", bs.sh_degree},
+                                {"shares_appearance_embedding", t.shared_embedding()},
                                 {"adam_step", sky.adam_step}};
     put_per_image_model(c, "background", sky);
   }
@@ -195,6 +196,8 @@ BackgroundModel background_from_checkpoint(const Checkpoint& c) {
   s.hidden_width = m.at("hidden_width").get<int>();
   s.hidden_layers = m.at("hidden_layers").get<int>();
   s.sh_degree = m.at("sh_degree").get<int>();
+  // Absent in models from before the option: those read their own embeddings.
+  s.share_appearance_embedding = m.value("shares_appearance_embedding", false);
   try {
     s.validate();
   } catch (const std::invalid_argument& e) {
@@ -275,6 +278,12 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
                             std::to_string(got.sh_degree) + "; this run asks for " + std::to_string(want.image_dim) +
                             ", " + std::to_string(want.hidden_layers) + " of " + std::to_string(want.hidden_width) +
                             " and " + std::to_string(want.sh_degree));
+    if (got.share_appearance_embedding != trainer.shared_embedding())
+      throw CheckpointError(c.source.string() + ": the checkpoint's background model reads " +
+                            (got.share_appearance_embedding ? "the appearance embeddings" : "its own embeddings") +
+                            "; this run's would read " +
+                            (trainer.shared_embedding() ? "the appearance embeddings" : "its own") +
+                            " (background.share_appearance_embedding must match the run being resumed)");
     if (sky.views() != trainer.data().train.size())
       throw CheckpointError(c.source.string() + ": the checkpoint's background model has embeddings for " +
                             std::to_string(sky.views()) + " training views, this run has " +

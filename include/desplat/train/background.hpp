@@ -41,6 +41,11 @@ struct BackgroundSettings {
   float lambda_opaque = 0.01f;
   float explained_error = 0.003f;  // mean |photo − bg| over RGB below this …
   float explained_share = 0.6f;    // … in more than this share of the pixel's 3×3 box
+  // With appearance on too, read the appearance model's embedding e_j instead of our own (the
+  // authors' form): a photo's exposure is then one vector for the scene and the sky alike, and
+  // the Photo Tourism protocol fits one embedding per test view, not two. Our own embeddings
+  // stay in the model (and the checkpoint) unused. Needs image_dim = appearance.image_dim.
+  bool share_appearance_embedding = true;
 
   int sh_degree_at(int64_t step) const;
   // Throws std::invalid_argument naming the setting (prefix "background.").

@@ -279,6 +279,10 @@ class Trainer {
   // The latest step's pixels neither layer explains [H·W of that step's camera]; after a step
   // that seeded distractors, the eroded mask they were drawn from. For inspection.
   const std::vector<uint8_t>& uncovered_mask() const { return uncovered_mask_; }
+  // Whether the background reads the appearance embedding (BackgroundSettings::
+  // share_appearance_embedding with both models on), and the embedding it reads for a view.
+  bool shared_embedding() const;
+  std::span<const float> sky_embedding(size_t view) const;
 
  private:
   const TrainingData& data_;
