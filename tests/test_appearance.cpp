@@ -7,13 +7,16 @@
 
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <random>
+#include <set>
 
 #include "desplat/io/scene.hpp"
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/synth/synth.hpp"
 #include "desplat/train/appearance.hpp"
 #include "desplat/train/effects.hpp"
+#include "desplat/train/loss.hpp"
 #include "desplat/train/training_checkpoint.hpp"
 #include "support/expect.hpp"
 #include "support/synthetic_views.hpp"
@@ -321,6 +324,69 @@ TEST(Appearance, ExposureChangesAreLearnedAndTestViewsScoredByTheProtocol) {
   // The per-Gaussian features grew with the Gaussians (densification copies rows).
   EXPECT_EQ(a.gaussians().params.features.size(), a.gaussians().size() * size_t(with.appearance.feature_dim()));
   a.mutable_gaussians().check_consistent();
+}
+
+// The Photo Tourism fit's start (appearance.test_start_from_best_look), against a brute force
+// written here: each training look rendered through the public render() and scored by the
+// photometric loss on the left half; the fit must start from the argmin.
+std::vector<float> left_half(const Camera& cam) {
+  std::vector<float> left(size_t(cam.width) * cam.height, 0.0f);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width / 2; ++x) left[size_t(y) * cam.width + x] = 1.0f;
+  return left;
+}
+
+std::string brute_force_best_look(const Trainer& t, const Camera& cam, const FloatImage& photo, const TrainConfig& cfg) {
+  const std::vector<float> left = left_half(cam);
+  double best = std::numeric_limits<double>::infinity();
+  std::string name;
+  for (size_t j = 0; j < t.data().train.size(); ++j) {
+    const FloatImage img = t.render(cam, cfg.eval_background, t.training_look(j));
+    const double loss = photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, cfg.ssim_lambda, {}, left).loss;
+    if (loss < best) best = loss, name = t.data().train[j].name;
+  }
+  return name;
+}
+
+TEST(Appearance, TheFitStartsFromTheTrainingLookThatFitsTheLeftHalfBest) {
+  const TrainingData data = exposed_views(15);
+  const TrainConfig cfg = appearance_config(200);
+  ASSERT_TRUE(cfg.appearance.test_start_from_best_look);  // the default
+  Trainer t(data, cfg);
+  for (int i = 0; i < 200; ++i) t.step();
+  std::set<std::string> starts;
+  for (const TrainView& v : data.test) {
+    const ViewLook look = t.fit_look(v, left_half(v.camera));
+    EXPECT_EQ(look.start, brute_force_best_look(t, v.camera, to_float(v.image), cfg)) << v.name;
+    starts.insert(look.start);
+  }
+  EXPECT_GT(starts.size(), 1u);  // the test views do not all start alike: the choice is exercised
+
+  // A view larger than kLookSearchPixels is judged on a copy halved until it fits: the test
+  // view at 4× (pixels repeated), judged at 2× (128 px across), as the brute force at 2× says.
+  const TrainView& v = data.test.front();
+  TrainView big = v;
+  big.camera.fx *= 4, big.camera.fy *= 4, big.camera.cx *= 4, big.camera.cy *= 4;
+  big.camera.width *= 4, big.camera.height *= 4;
+  big.image = ByteImage{big.camera.width, big.camera.height, 3, {}};
+  big.image.pixels.resize(size_t(big.camera.width) * big.camera.height * 3);
+  ASSERT_EQ(v.image.channels, 3);
+  for (int y = 0; y < big.camera.height; ++y)
+    for (int x = 0; x < big.camera.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        big.image.pixels[(size_t(y) * big.camera.width + x) * 3 + c] = v.image.pixels[(size_t(y / 4) * v.camera.width + x / 4) * 3 + c];
+  ASSERT_GT(std::max(big.camera.width, big.camera.height), kLookSearchPixels);
+  const Camera judged = downscale_camera(big.camera, 2);
+  ASSERT_LE(std::max(judged.width, judged.height), kLookSearchPixels);
+  EXPECT_EQ(t.data().train[t.best_training_look(big, left_half(big.camera))].name,
+            brute_force_best_look(t, judged, to_float(downscale_bytes(big.image, 2)), cfg));
+
+  // Off (--preset paper): the mean look.
+  TrainConfig off = appearance_config(20);
+  off.appearance.test_start_from_best_look = false;
+  Trainer m(data, off);
+  for (int i = 0; i < 20; ++i) m.step();
+  EXPECT_EQ(m.fit_look(v, left_half(v.camera)).start, "mean");
 }
 
 // Resuming an appearance model continues bit-exactly; a checkpoint that does not fit the run

@@ -88,6 +88,8 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   for (const ViewMetrics& v : m) {
     per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}, {"protocol", to_string(v.protocol)},
                    {"psnr_right_half", v.psnr_right_half}, {"ssim_right_half", v.ssim_right_half}});
+    // Which look the Photo Tourism fit started from (a training view's name, or "mean").
+    if (!v.look.start.empty()) per.back()["look_start"] = v.look.start;
     psnr_sum += v.psnr, ssim_sum += v.ssim;
     right_psnr_sum += v.psnr_right_half, right_ssim_sum += v.ssim_right_half;
   }
@@ -506,14 +508,18 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
 
   if (config.appearance.enabled)
     std::printf("appearance model: embeddings of %d per training image and %d per Gaussian, MLP %d x %d; test views are "
-                "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps; scored on the right)\n",
+                "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps from %s; scored on the "
+                "right)\n",
                 config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
-                config.appearance.hidden_width, config.appearance.test_steps);
+                config.appearance.hidden_width, config.appearance.test_steps,
+                config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
   if (config.background.enabled)
     std::printf("background model: embeddings of %d per training image, MLP %d x %d to spherical harmonics of degree %d; "
-                "test views are scored by the Photo Tourism protocol (embeddings fitted on the left half, %d steps)\n",
+                "test views are scored by the Photo Tourism protocol (embeddings fitted on the left half, %d steps from "
+                "%s)\n",
                 config.background.image_dim, config.background.hidden_layers, config.background.hidden_width,
-                config.background.sh_degree, config.appearance.test_steps);
+                config.background.sh_degree, config.appearance.test_steps,
+                config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
   const json run_json = {{"static_only", opt.static_only},
                          {"preset", resumed_run.value("preset", preset)},
                          {"effects", Effects::of(config).to_string()},

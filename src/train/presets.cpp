@@ -50,6 +50,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.min_blend_weight = 0.0f;  // no idle cull; the default too, stated for the record
     c.transient_points.action = TransientPointAction::keep;
     c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
+    c.appearance.test_start_from_best_look = false;  // the test-time fit from the mean look, as before
     c.background.lambda_opaque = 0.0f;  // the authors' L_bg alone (docs/METHOD.md §11)
     return c;
   }

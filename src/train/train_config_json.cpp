@@ -114,6 +114,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"appearance.lr.gaussian_embeddings", &c.lr.features},
       {"appearance.test_steps", &c.appearance.test_steps},
       {"appearance.test_lr", &c.appearance.test_lr},
+      {"appearance.test_start_from_best_look", &c.appearance.test_start_from_best_look},
       {"background.enabled", &c.background.enabled},
       {"background.image_dim", &c.background.image_dim},
       {"background.share_appearance_embedding", &c.background.share_appearance_embedding},

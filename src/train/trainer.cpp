@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numeric>
 #include <omp.h>
 #include <stdexcept>
@@ -562,16 +563,9 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
   const FloatImage photo = to_float(view.image);
   const bool recolor = config_.appearance.enabled, sky = config_.background.enabled;
-  // Start from the mean training look.
-  ViewLook look;
-  if (recolor) {
-    const size_t dim = size_t(config_.appearance.image_dim);
-    look.appearance.assign(dim, 0.0f);
-    for (size_t j = 0; j < appearance_.views(); ++j)
-      for (size_t k = 0; k < dim; ++k) look.appearance[k] += appearance_.embedding(j)[k] / float(appearance_.views());
-  }
+  ViewLook look = config_.appearance.test_start_from_best_look ? training_look(best_training_look(view, fit))
+                                                               : mean_look();
   const bool shared = shared_embedding();
-  if (sky) look.background = shared ? look.appearance : background_.mean_embedding();
   std::vector<float> m_a(look.appearance.size(), 0.0f), v_a(m_a), m_b(look.background.size(), 0.0f), v_b(m_b);
   const RasterSettings rs = raster_settings();
   const int bg_degree = config_.background.sh_degree_at(step_);
@@ -611,6 +605,56 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     }
   }
   return look;
+}
+
+ViewLook Trainer::training_look(size_t j) const {
+  ViewLook look;
+  look.start = data_.train.at(j).name;
+  if (config_.appearance.enabled) {
+    const std::span<const float> e = appearance_.embedding(j);
+    look.appearance.assign(e.begin(), e.end());
+  }
+  if (config_.background.enabled) {
+    const std::span<const float> e = sky_embedding(j);
+    look.background.assign(e.begin(), e.end());
+  }
+  return look;
+}
+
+ViewLook Trainer::mean_look() const {
+  ViewLook look;
+  look.start = "mean";
+  if (config_.appearance.enabled) {
+    const size_t dim = size_t(config_.appearance.image_dim);
+    look.appearance.assign(dim, 0.0f);
+    for (size_t j = 0; j < appearance_.views(); ++j)
+      for (size_t k = 0; k < dim; ++k) look.appearance[k] += appearance_.embedding(j)[k] / float(appearance_.views());
+  }
+  if (config_.background.enabled) look.background = shared_embedding() ? look.appearance : background_.mean_embedding();
+  return look;
+}
+
+size_t Trainer::best_training_look(const TrainView& view, std::span<const float> fit) const {
+  if (!has_per_image_models()) throw std::invalid_argument("best_training_look: this model has no per-image looks");
+  const int width = view.camera.width, height = view.camera.height;
+  if (fit.size() != size_t(width) * height)
+    throw std::invalid_argument("best_training_look: the fit mask does not match view " + view.name);
+  int factor = 1;
+  while (std::max(width, height) / factor > kLookSearchPixels) factor *= 2;
+  const Camera cam = downscale_camera(view.camera, factor);
+  const FloatImage photo = to_float(factor == 1 ? view.image : downscale_bytes(view.image, factor));
+  std::vector<uint8_t> judged(fit.size());
+  for (size_t p = 0; p < fit.size(); ++p) judged[p] = fit[p] > 0.5f && (view.keep.empty() || view.keep[p] != 0);
+  const std::vector<uint8_t> small = factor == 1 ? judged : downscale_keep(judged, width, height, factor);
+  const std::vector<float> keep(small.begin(), small.end());
+  size_t best = 0;
+  double best_loss = std::numeric_limits<double>::infinity();
+  for (size_t j = 0; j < data_.train.size(); ++j) {
+    const FloatImage img = render(cam, config_.eval_background, training_look(j));
+    const double loss = photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, config_.ssim_lambda, {}, keep).loss;
+    if (loss < best_loss) best_loss = loss, best = j;  // the first of equals: the lowest index
+  }
+  return best;
 }
 
 ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>& background) const {

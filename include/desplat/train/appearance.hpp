@@ -36,6 +36,14 @@ struct AppearanceSettings {
   // for this many Adam steps at this rate on the left half of the image, everything else frozen.
   int test_steps = 128;
   float test_lr = 0.01f;
+  // Where that fit starts. On (the default): from the training photo's look that best fits the
+  // left half — each training view's embeddings scored by the photometric loss on a copy of
+  // the test view at most kLookSearchPixels (trainer.hpp) across, one forward render each — so a photo far
+  // from the average look does not spend its 128 steps getting there. Off (--preset paper):
+  // from the mean training look. It gained 0.68–0.88 dB on the means of four to ten seeds of
+  // two synthetic captures with per-photo exposure (docs/bench/issue15_effects.md, "Where the
+  // fit starts").
+  bool test_start_from_best_look = true;
 
   int feature_dim() const { return 6 * fourier_frequencies; }
   // Throws std::invalid_argument naming the setting (prefix "appearance.").

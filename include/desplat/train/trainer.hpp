@@ -195,6 +195,8 @@ const char* to_string(EvalProtocol p);
 // when that model is off or not asked for.
 struct ViewLook {
   std::vector<float> appearance, background;
+  // fit_look: the training view whose look the fit started from, or "mean" (the mean look).
+  std::string start;
 };
 
 struct ViewMetrics {
@@ -245,9 +247,18 @@ class Trainer {
   std::vector<ViewMetrics> evaluate(const std::vector<TrainView>& views) const;
   // Test-time appearance: the embeddings of every per-image model this one has, for `view`,
   // fitted together by appearance.test_steps Adam steps at appearance.test_lr on the pixels
-  // where `fit` is 1 ([H·W], the view's own mask applies too), starting from the mean of the
-  // training embeddings; everything else frozen.
+  // where `fit` is 1 ([H·W], the view's own mask applies too), starting from the training look
+  // that fits those pixels best (appearance.test_start_from_best_look, best_training_look) or
+  // from the mean of the training embeddings; everything else frozen.
   ViewLook fit_look(const TrainView& view, std::span<const float> fit) const;
+  // Training view j's own look (its embeddings), and the mean of them all.
+  ViewLook training_look(size_t j) const;
+  ViewLook mean_look() const;
+  // The training view whose look gives the lowest photometric loss on the pixels of `view`
+  // where `fit` is 1, judged on a copy at most kLookSearchPixels across (the look is a colour
+  // change over the whole frame: a small copy ranks the looks as the full one does, at a
+  // fraction of the cost of one render per training view).
+  size_t best_training_look(const TrainView& view, std::span<const float> fit) const;
   bool has_per_image_models() const { return config_.appearance.enabled || config_.background.enabled; }
   // Appearance model (appearance.hpp); empty (no views) when config.appearance is off.
   const AppearanceModel& appearance() const { return appearance_; }
@@ -352,6 +363,9 @@ void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::spa
 
 // The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
+// Trainer::best_training_look judges the looks on a copy of the view halved until its longer
+// side is at most this many pixels.
+inline constexpr int kLookSearchPixels = 160;
 // A user mask ([height·width], 1 = keep) at 1/factor resolution, sized as downscale_camera: a
 // coarse pixel is kept only when every pixel it covers is.
 std::vector<uint8_t> downscale_keep(const std::vector<uint8_t>& keep, int width, int height, int factor);
