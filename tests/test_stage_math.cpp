@@ -7,6 +7,7 @@
 
 #include "raster/fast_exp.hpp"
 #include "raster/stage_math.hpp"
+#include "raster/tiles.hpp"
 
 namespace desplat::raster {
 namespace {
@@ -142,6 +143,88 @@ TEST(StageVjp, ShColorAllDegrees) {
       for (int i = 0; i < 3 * K; ++i) expect_close(dcoeffs[i], L.v[i], scale, "dcoeff", i);
       for (int i = 0; i < 3; ++i) expect_close(dmean[i], L.v[48 + i], scale, "dmean", i);
     }
+}
+
+
+// RowChords (tiles.hpp) against the pixel loops' own test, pixel by pixel. Random ellipses
+// from round to needle-thin (standard deviations √0.3 … 400 px, the forward's dilation is the
+// floor), any tilt, centres in and around a 64×64 image, opacity 2·10⁻³ … 1; boxes as the
+// forward builds them (blend_radii). In every tile row of every box:
+// - each 8-column half holding a pixel that the loops would blend (their float σ, fast exp
+//   and clamp: σ ≥ 0 and α ≥ 1/255) is kept — skipping it would change the render;
+// - a half whose pixel centres all lie clearly outside the ellipse (exact σ in double above
+//   ln(255·o) plus RowChords' stated margins plus 0.05) is dropped, so the chord does cut.
+TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  constexpr int kImage = 64;
+  int64_t blended_halves = 0, empty_halves = 0, dropped_empty = 0, kept_blended = 0, needles = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    const double s1 = std::exp(std::log(std::sqrt(0.3)) + u(rng) * std::log(400.0 / std::sqrt(0.3)));
+    const double s2 = trial % 3 == 0 ? std::sqrt(0.3) + 0.2 * u(rng) : std::exp(std::log(std::sqrt(0.3)) + u(rng) * std::log(400.0 / std::sqrt(0.3)));
+    const double th = 3.14159265358979 * u(rng), co = std::cos(th), si = std::sin(th);
+    const double cxx = co * co * s1 * s1 + si * si * s2 * s2, cyy = si * si * s1 * s1 + co * co * s2 * s2;
+    const double cxy = co * si * (s1 * s1 - s2 * s2), det = cxx * cyy - cxy * cxy;
+    const float a = float(cyy / det), b = float(-cxy / det), c = float(cxx / det);
+    const float o = float(std::min(0.9999, std::exp(std::log(2e-3) * u(rng))));
+    const float mx = float(-40.0 + (kImage + 80.0) * u(rng)), my = float(-40.0 + (kImage + 80.0) * u(rng));
+    const float k = opacity_extent_sigmas(o);
+    if (k == 0.0f) continue;
+    const int rx = int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cxx))), std::ceil(k * std::sqrt(float(cxx)))));
+    const int ry = int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cyy))), std::ceil(k * std::sqrt(float(cyy)))));
+    needles += std::max(s1, s2) > 30 * std::min(s1, s2);
+    const double level = std::log(255.0 * double(o));
+    const double px = rx + 1.0, py = ry + 1.0;
+    const double margin = 0.01 + 2e-6 * (0.5 * a * px * px + std::abs(double(b)) * px * py + 0.5 * c * py * py);
+    for (int y0 = 0; y0 < kImage; y0 += kTileSize)
+      for (int x0 = 0; x0 < kImage; x0 += kTileSize) {
+        int r0, r1, h0, h1;
+        box_rows_in_tile(my, ry, y0, kTileSize, r0, r1);
+        box_halves_in_tile(mx, rx, x0, kTileSize, h0, h1);
+        if (h0 > h1 || r0 > r1) continue;
+        const RowChords chords(mx, a, b, c, o, rx, ry, x0, h0, h1);
+        for (int r = r0; r <= r1; ++r) {
+          const float dy = my - (y0 + r + 0.5f);
+          int rh0, rh1;
+          chords.halves(dy, rh0, rh1);
+          for (int h = h0; h <= h1; ++h) {
+            bool blended = false, clearly_outside = true;
+            for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
+              const float dx = mx - (x0 + col + 0.5f);
+              const float sigma = gaussian_sigma(a, b, c, dx, dy);
+              const float alpha = clamp_alpha(o * fast_exp_nonpositive(-sigma));
+              blended |= sigma >= 0.0f && alpha >= kAlphaMin;
+              const double ddx = double(mx) - (x0 + col + 0.5), ddy = double(my) - (y0 + r + 0.5);
+              const double exact = 0.5 * a * ddx * ddx + double(b) * ddx * ddy + 0.5 * c * ddy * ddy;
+              clearly_outside &= exact > level + margin + 0.05;
+            }
+            const bool kept = rh0 <= h && h <= rh1;
+            if (blended) {
+              ++blended_halves;
+              kept_blended += kept;
+              EXPECT_TRUE(kept) << "trial " << trial << " tile " << x0 << "," << y0 << " row " << r << " half " << h;
+            }
+            if (clearly_outside) ++empty_halves, dropped_empty += !kept;
+          }
+        }
+      }
+  }
+  EXPECT_EQ(kept_blended, blended_halves);
+  EXPECT_GT(blended_halves, 20000);
+  EXPECT_GT(needles, 300);
+  EXPECT_GT(empty_halves, 5000);
+  EXPECT_GE(double(dropped_empty), 0.99 * double(empty_halves)) << dropped_empty << " of " << empty_halves;
+}
+
+// A conic that is not positive definite (a ≤ 0, or NaN) gives no chord: the box's halves pass through.
+TEST(RowChords, PassTheBoxThroughWhenTheConicIsNotPositiveDefinite) {
+  for (const float a : {0.0f, -1.0f, NAN}) {
+    const RowChords chords(8.0f, a, 0.0f, 1.0f, 0.5f, 20, 20, 0, 0, 1);
+    int rh0 = -5, rh1 = -5;
+    chords.halves(3.0f, rh0, rh1);
+    EXPECT_EQ(rh0, 0);
+    EXPECT_EQ(rh1, 1);
+  }
 }
 
 }  // namespace

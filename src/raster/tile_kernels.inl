@@ -61,12 +61,17 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
     box_halves_in_tile(mx, out.blend_radii[2 * g], x0, cols, h0, h1);
     if (h0 > h1) continue;
+    const RowChords chords(mx, a, b, c, o, out.blend_radii[2 * g], out.blend_radii[2 * g + 1], x0, h0, h1);
     // Pixels that stopped at this entry, per column; summed once per entry rather than per row.
     alignas(64) int32_t finished[S] = {};
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-      for_each_span(h0, h1, [&](auto width, int first) {
+      int rh0, rh1;
+      chords.halves(dy, rh0, rh1);
+      if (rh0 > rh1) continue;
+      evaluated += (rh1 - rh0 + 1) * kHalfTile;
+      for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd
         for (int col = first; col < first + decltype(width)::value; ++col) {
           const int j = row + col;
@@ -94,7 +99,6 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
       });
     }
     for (int col = 0; col < S; ++col) remaining -= finished[col];
-    evaluated += int64_t(std::max(0, r1 - r0 + 1)) * (h1 - h0 + 1) * kHalfTile;
   }
 
   for (int r = 0; r < rows; ++r)
@@ -162,10 +166,14 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     int r0, r1, h0, h1;
     box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
     box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
+    const RowChords chords(mx, a, b, c, o, fw.blend_radii[2 * g], fw.blend_radii[2 * g + 1], x0, h0, h1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-      for_each_span(h0, h1, [&](auto width, int first) {
+      int rh0, rh1;
+      chords.halves(dy, rh0, rh1);
+      if (rh0 > rh1) continue;
+      for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd
         for (int col = first; col < first + decltype(width)::value; ++col) {
           const int j = row + col;

@@ -50,6 +50,58 @@ inline void box_halves_in_tile(float mx, int rx, int x0, int cols, int& h0, int&
   h1 = c1 < c0 ? h0 - 1 : c1 / kHalfTile;
 }
 
+// The 8-column halves of each tile row, within the box's halves, that hold a pixel centre
+// where one Gaussian's α can reach 1/255: the row's chord of the ellipse
+// σ(dx, dy) = ½a·dx² + b·dx·dy + ½c·dy² ≤ s, with dx = mx − px, dy = my − py as the pixel
+// loops compute them and s = ln(255·o) + 0.01 (opacity_extent_sigmas' margin). The box is
+// the ellipse's bounding rectangle, so a tilted or thin ellipse leaves one half of many
+// rows empty, and the loops skip it. Exact: a skipped half holds no pixel the loops would
+// blend (tests/test_stage_math.cpp checks it against the loops' own float σ). Built once
+// per tile entry, in double, with s widened by a bound on the loops' float error in σ (a
+// few units of roundoff of its largest term within the box); per row it costs one float
+// square root. Rows of a box within one half gain only when the chord misses them whole.
+class RowChords {
+ public:
+  RowChords(float mx, float a, float b, float c, float opacity, int rx, int ry, int x0, int h0, int h1)
+      : h0_(h0), h1_(h1), used_(h0 <= h1 && a > 0.0f) {
+    if (!used_) return;
+    const double ad = a, bd = b, cd = c, px = double(rx) + 1.0, py = double(ry) + 1.0;
+    const double largest = 0.5 * ad * px * px + std::abs(bd) * px * py + 0.5 * cd * py * py;
+    const double level = std::log(255.0 * double(opacity)) + 0.01 + 2e-6 * largest;
+    // For row dy the chord is px ∈ mx + (b/a)·dy ± √((b² − ac)/a²·dy² + 2·level/a).
+    slope_ = float(bd / ad);
+    curvature_ = float((bd * bd - ad * cd) / (ad * ad));
+    const double reach = 2.0 * level / ad;
+    reach_ = float(reach * (1.0 + 1e-5));  // the float evaluation below cancels up to ~1e-7·reach
+    centre_ = float(double(mx) - x0 - 0.5);  // column coordinate of the centre
+    pad_ = float(0.01 + 1e-5 * std::sqrt(std::max(reach, 0.0)));
+    if (!(level > 0.0) || !std::isfinite(reach) || !std::isfinite(curvature_)) used_ = false;
+  }
+  // The halves [rh0, rh1] of the row at dy = my − (its pixel centres' y), as the loops compute it
+  // (rh0 > rh1: none).
+  void halves(float dy, int& rh0, int& rh1) const {
+    rh0 = h0_, rh1 = h1_;
+    if (!used_) return;
+    const float t = curvature_ * dy * dy + reach_;
+    if (t < 0.0f) {
+      rh1 = rh0 - 1;
+      return;
+    }
+    const float half_width = std::sqrt(t) + pad_, mid = centre_ + slope_ * dy;
+    // Columns hold centres at 0, 1, …: the chord's first and last column.
+    const float lo = std::ceil(mid - half_width), hi = std::floor(mid + half_width);
+    const bool first = lo <= float(kHalfTile - 1) && hi >= 0.0f && lo <= hi;
+    const bool second = lo <= float(kTileSize - 1) && hi >= float(kHalfTile) && lo <= hi;
+    rh0 = std::max(h0_, first ? 0 : 1);
+    rh1 = std::min(h1_, second ? 1 : 0);
+  }
+
+ private:
+  int h0_, h1_;
+  bool used_;
+  float slope_ = 0, curvature_ = 0, reach_ = 0, centre_ = 0, pad_ = 0;
+};
+
 inline int thread_count(const RasterSettings& s) {
   return s.num_threads > 0 ? s.num_threads : omp_get_max_threads();
 }
