@@ -147,6 +147,51 @@ TEST(Distractors, RefineCullsUnseenAndDensifiesOnlyBefore15000) {
   after.check_consistent();
 }
 
+// The split threshold at the distractors' depth: size_threshold 0.01 at a scene depth of 1.6
+// is 0.01 · 0.02 / 1.6 = 1.25e-4 world units for distractors at ρ = 0.02.
+TEST(Distractors, SplitThresholdIsTheStaticAngleAtTheirDepth) {
+  DensifySettings d;
+  DistractorSettings s;
+  EXPECT_FALSE(s.size_threshold_at_scene_depth);  // measured, off by default
+  EXPECT_FLOAT_EQ(distractor_size_threshold(d, s, 1.6), 0.01f);
+  s.size_threshold_at_scene_depth = true;
+  EXPECT_NEAR(distractor_size_threshold(d, s, 1.6), 1.25e-4, 1e-9);
+  EXPECT_FLOAT_EQ(distractor_size_threshold(d, s, 0.0), 0.01f);  // no points: the world threshold
+
+  // Two seen distractors with a high gradient, max scales 3e-4 (above 1.25e-4) and 1e-4 (below).
+  auto make = [] {
+    GaussianSet g;
+    g.color_mode = ColorMode::RGB;
+    g.resize(2);
+    for (size_t i = 0; i < 2; ++i) {
+      g.opacity_logits[i] = 2.0f;
+      for (int k = 0; k < 3; ++k) g.log_scales[3 * i + k] = std::log(i == 0 ? 3e-4f : 1e-4f);
+    }
+    TrainableGaussians t(g);
+    t.visible_count = {10, 10};
+    t.absgrad_sum = {10.0f, 10.0f};
+    t.max_screen_radius = {0.01f, 0.01f};
+    t.statistics_empty = false;
+    return t;
+  };
+  std::mt19937_64 rng(1);
+  TrainableGaussians at_depth = make();
+  const RefineReport r = refine_distractors(at_depth, d, s, 5000, 100, rng, kUnlimitedGrowth, 1.6);
+  // The large one splits into 2 samples at 3e-4 / 1.6 = 1.875e-4 (still above the threshold,
+  // so not duplicated as well); the small one is duplicated.
+  EXPECT_EQ(r.split, 1);
+  EXPECT_EQ(r.duplicated, 1);
+  EXPECT_EQ(at_depth.size(), 1u + 2u + 1u);  // the small one, 2 split samples, 1 copy
+  float largest = 0;
+  for (size_t i = 0; i < at_depth.size(); ++i) largest = std::max(largest, std::exp(at_depth.params.log_scales[3 * i]));
+  EXPECT_NEAR(largest, 1.875e-4f, 1e-8f);  // nothing keeps the old 3e-4
+  TrainableGaussians world = make();
+  const RefineReport w = refine_distractors(world, d, DistractorSettings{}, 5000, 100, rng, kUnlimitedGrowth, 1.6);
+  EXPECT_EQ(w.split, 0);  // off (the default): both far below 0.01, duplicated at full size
+  EXPECT_EQ(w.duplicated, 2);
+  EXPECT_EQ(world.size(), 4u);
+}
+
 TrainConfig desplat_config(int64_t iterations) {
   TrainConfig c = short_schedule(iterations);
   c.distractors.initial_count = 200;

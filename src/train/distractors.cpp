@@ -54,10 +54,17 @@ bool distractor_refine_due(int64_t step, int num_train_views, const DensifySetti
   return step % period < d.refine_every;
 }
 
+float distractor_size_threshold(const DensifySettings& d, const DistractorSettings& s, double scene_depth) {
+  if (!s.size_threshold_at_scene_depth || !(scene_depth > 0.0)) return d.size_threshold;
+  return float(double(d.size_threshold) * double(s.init_depth) / scene_depth);
+}
+
 RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d, const DistractorSettings& s,
-                                int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new) {
+                                int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new, double scene_depth) {
   const bool densify = step < d.stop_split_at && step > s.grow_after;
-  return apply_density_control(g, d, step, image_size, densify, /*cull_unseen=*/true, rng, max_new);
+  DensifySettings at_their_depth = d;
+  at_their_depth.size_threshold = distractor_size_threshold(d, s, scene_depth);
+  return apply_density_control(g, at_their_depth, step, image_size, densify, /*cull_unseen=*/true, rng, max_new);
 }
 
 int64_t cull_idle_distractors(TrainableGaussians& g, const Camera& camera, int factor, const DistractorSettings& s) {

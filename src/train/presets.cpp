@@ -42,6 +42,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.refine_every_epochs = 10;
     c.distractors.lambda_mask_tv = 0.0f;
     c.distractors.pixels_per_distractor = 0;
+    c.distractors.size_threshold_at_scene_depth = false;  // the default too, stated for the record
     c.distractors.reseed_starved_views = false;
     c.distractors.seed_uncovered = false;
     c.distractors.grow_after = 0;

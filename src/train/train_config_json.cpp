@@ -97,6 +97,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.lambda_owned", &c.distractors.lambda_owned},
       {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
       {"distractors.count_connected_misses", &c.distractors.count_connected_misses},
+      {"distractors.size_threshold_at_scene_depth", &c.distractors.size_threshold_at_scene_depth},
       {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
       {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
       {"distractors.seed_waits_after_reset", &c.distractors.seed_waits_after_reset},

@@ -120,6 +120,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     std::vector<Camera> cameras;  // training views in name order: the capture order
     for (const TrainView& v : data_.train) cameras.push_back(v.camera);
     camera_path_ = desplat::camera_path(cameras, data_.points, config_.densify.camera_path);
+    scene_depth_ = median_scene_depth(cameras, data_.points);
   }
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
@@ -416,7 +417,7 @@ void Trainer::refine_all_distractors(int image_size, int factor, StepStats& stat
       // Idle distractors go first, so the cap's room goes to the ones the view needs.
       r.idle = cull_idle_distractors(d, downscale_camera(full, factor), factor, ds);
       r.budget = distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds);
-      r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget);
+      r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget, scene_depth_);
       r.after = int64_t(d.size());
       stats.distractor_refine += r.report;
       stats.distractor_refinements.push_back(r);

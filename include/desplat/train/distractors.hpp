@@ -70,6 +70,15 @@ struct DistractorSettings {
   // not kept (docs/bench/issue17_ab.md, round 6): +0.54 dB on a clutter-free synthetic scene
   // at 500×375, −0.40 dB on the clean fox over two seeds.
   bool count_connected_misses = false;
+  // Split or duplicate by the angle a distractor subtends, as the static layer is judged at
+  // the scene's depth: densify.size_threshold is a world size for Gaussians near the scene's
+  // median depth D, so a distractor (at depth init_depth ρ, about 1/65 of D) is large above
+  // size_threshold · ρ / D. With the world threshold no distractor is ever large (their
+  // scales are ~1e-4 against 0.01): every high-gradient one is duplicated at full size. Off:
+  // it cut the distractors' Gaussian–pixel pairs by 20–27 % on four scenes, but lost 0.44 and
+  // 0.39 dB on fox_occ100 at two seeds (docs/bench/issue17_ab.md, round 13). Needs sparse
+  // points (D); the world threshold without them.
+  bool size_threshold_at_scene_depth = false;
   // A view whose buffer has fewer than one distractor per 256 pixels the static layer leaves
   // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
   bool reseed_starved_views = true;
@@ -117,13 +126,19 @@ GaussianSet init_distractors(const Camera& camera, const DistractorSettings& set
 bool distractor_refine_due(int64_t step, int num_train_views, const DensifySettings& densify,
                            const DistractorSettings& settings);
 
-// One view's refinement (§7): the static thresholds on the view's own statistics, split /
-// duplicate until densify.stop_split_at, culling always, including every distractor the
-// view did not see since the last refinement. No opacity reset.
+// The world-size threshold refine_distractors splits above: densify.size_threshold, scaled by
+// init_depth / scene_depth with size_threshold_at_scene_depth (scene_depth > 0 only; [world units]).
+float distractor_size_threshold(const DensifySettings& densify, const DistractorSettings& settings, double scene_depth);
+
+// One view's refinement (§7): the static thresholds on the view's own statistics (large:
+// above distractor_size_threshold), split / duplicate until densify.stop_split_at, culling
+// always, including every distractor the view did not see since the last refinement. No
+// opacity reset.
 // `max_new`: the view's growth budget (kUnlimitedGrowth: none).
+// `scene_depth`: the median scene depth (median_scene_depth, [world units]; 0: unknown).
 RefineReport refine_distractors(TrainableGaussians& view_distractors, const DensifySettings& densify,
                                 const DistractorSettings& settings, int64_t step, int image_size, std::mt19937_64& rng,
-                                int64_t max_new = kUnlimitedGrowth);
+                                int64_t max_new = kUnlimitedGrowth, double scene_depth = 0.0);
 
 // The idle cull (DistractorSettings::min_blend_weight): renders `view_distractors` with
 // `camera` (the view at the step's training size, `factor` times smaller than full training

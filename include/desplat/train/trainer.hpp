@@ -300,6 +300,7 @@ class Trainer {
   TrainConfig config_;
   TrainableGaussians gaussians_;
   CameraPath camera_path_;  // from the training cameras and sparse points, at construction
+  double scene_depth_ = 0;  // median_scene_depth of the same [world units]; 0: no points
   std::vector<TrainableGaussians> distractors_;
   AppearanceModel appearance_;
   BackgroundModel background_;
