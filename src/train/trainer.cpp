@@ -120,7 +120,10 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     std::vector<Camera> cameras;  // training views in name order: the capture order
     for (const TrainView& v : data_.train) cameras.push_back(v.camera);
     camera_path_ = desplat::camera_path(cameras, data_.points, config_.densify.camera_path);
-    scene_depth_ = median_scene_depth(cameras, data_.points);
+    // Only the (off by default) distractor size rule needs it; the camera path has it already
+    // when its own rule is on.
+    if (config_.distractors.enabled && config_.distractors.size_threshold_at_scene_depth)
+      scene_depth_ = camera_path_.median_depth > 0 ? camera_path_.median_depth : median_scene_depth(cameras, data_.points);
   }
   if (config_.distractors.enabled) {
     distractors_.reserve(data_.train.size());
