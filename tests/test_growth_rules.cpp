@@ -274,6 +274,38 @@ TEST(DistractorGrowth, IdleCullCountsPixelsAtFullTrainingResolution) {
   EXPECT_EQ(as_full.size(), 0u);
 }
 
+TEST(DistractorGrowth, AlphaSumIsEachDistractorsAlphaIntegratedOverTheImage) {
+  // 64×64 px, f = 100, a round Gaussian of world scale s at depth z on the optical axis has
+  // σ = f·s/z px, plus the rasterizer's 0.3 px² blur: ∫α = o·2π·(σ² + 0.3).
+  // A: z 1, s 0.1, o 0.5 → 0.5·2π·100.3 ≈ 315.09. B: straight behind A (layers count whatever
+  // covers them), z 2, s 0.1, o 0.8 → 0.8·2π·25.3 ≈ 127.17. C: behind the camera, 0.
+  // D: z 1, s 10 (σ = 1,000 px), counted as at most the image's 4,096 px.
+  const Camera camera = identity_camera(64, 100);
+  const GaussianSet g = round_distractors({{0.0f, 0.0f, 1.0f, 0.1f, 0.5f},
+                                           {0.0f, 0.0f, 2.0f, 0.1f, 0.8f},
+                                           {0.0f, 0.0f, -1.0f, 0.1f, 0.9f}});
+  const double a = 0.5 * 2 * M_PI * 100.3, b = 0.8 * 2 * M_PI * 25.3;
+  EXPECT_NEAR(distractor_alpha_sum(g.view(), camera), a + b, 1e-3 * (a + b));
+  const GaussianSet d = round_distractors({{0.0f, 0.0f, 1.0f, 10.0f, 0.5f}});
+  EXPECT_NEAR(distractor_alpha_sum(d.view(), camera), 4096.0, 1e-6);
+  EXPECT_EQ(distractor_alpha_sum(GaussianSet{}.view(), camera), 0.0);
+}
+
+TEST(DistractorGrowth, AlphaSumBudgetFillsTheLimitAtTheBuffersMeanAlpha) {
+  DistractorSettings s;
+  s.max_alpha_sum = 0.0f;
+  EXPECT_EQ(alpha_sum_budget(100, 4000.0, 0.1, 10000, s), kUnlimitedGrowth);  // off at 0 (--preset paper)
+  s.max_alpha_sum = 4.5f;  // exact in float, so the limits below are exact
+  // 10 % of 10,000 px unexplained: limit 4.5 · 1,000 = 4,500. 100 distractors summing 4,000:
+  // 40 each, room for ⌊500 / 40⌋ = 12 more.
+  EXPECT_EQ(alpha_sum_budget(100, 4000.0, 0.1, 10000, s), 12);
+  EXPECT_EQ(alpha_sum_budget(100, 4500.0, 0.1, 10000, s), 0);   // at the limit
+  EXPECT_EQ(alpha_sum_budget(100, 9000.0, 0.1, 10000, s), 0);   // over it: no growth, no forced shrink
+  EXPECT_EQ(alpha_sum_budget(100, 10.0, 0.0, 10000, s), 0);     // nothing unexplained
+  EXPECT_EQ(alpha_sum_budget(10, 10.0, 3.0, 100, s), 440);      // fraction clamped to 1: (450 − 10) / 1
+  EXPECT_EQ(alpha_sum_budget(0, 0.0, 0.1, 10000, s), kUnlimitedGrowth);  // empty: the count cap decides
+}
+
 TEST(ViewResidual, ErosionKeepsOnlyRegionInteriors) {
   // 6×4: a 3×3 block at x 0–2, y 1–3 (touching the left and bottom borders), one isolated
   // pixel at (5, 0). Only pixels whose in-image neighbours are all set survive: (0, 2) and
@@ -511,6 +543,39 @@ TrainConfig seeding_test_config(int num_downscales = 0) {
   return c;
 }
 
+TEST(TrainerRules, TheAlphaSumLimitStopsCopiesAndIsMeasuredOnlyWhenOn) {
+  // The same run twice: without the limit the distractor refinements copy high-gradient
+  // distractors; with a limit no buffer can be under (10⁻⁶ of a pixel's alpha per unexplained
+  // pixel), every view's budget is 0 and nothing is copied, and each refinement records the
+  // buffer's summed alpha it was judged on.
+  const TrainingData data = views_with_a_one_view_square();
+  int64_t copied[2] = {0, 0};
+  for (const bool limited : {false, true}) {
+    TrainConfig c = seeding_test_config();
+    c.distractors.reseed_starved_views = false;
+    c.distractors.seed_uncovered = false;
+    c.distractors.max_alpha_sum = limited ? 1e-6f : 0.0f;
+    Trainer t(data, c);
+    int refinements = 0;
+    for (int i = 0; i < c.iterations; ++i) {
+      const StepStats s = t.step();
+      for (const ViewRefinement& r : s.distractor_refinements) {
+        ++refinements;
+        copied[limited] += r.report.split + r.report.duplicated;
+        if (limited) {
+          EXPECT_GT(r.alpha_sum, 0.0);
+          EXPECT_EQ(r.budget, 0);
+        } else {
+          EXPECT_EQ(r.alpha_sum, 0.0);  // not measured when off
+        }
+      }
+    }
+    EXPECT_GT(refinements, 0);
+  }
+  EXPECT_GT(copied[0], 0);
+  EXPECT_EQ(copied[1], 0);
+}
+
 TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
   // Training view 0 gets a white 24×24 square the other views do not show; its buffer is
   // emptied. At the next distractor refinement the view is starved (and uncovered), and its
@@ -705,6 +770,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.grow_after, 0);
   EXPECT_EQ(paper.distractors.seed_after, 0);
   EXPECT_EQ(paper.distractors.min_blend_weight, 0.0f);  // no idle cull
+  EXPECT_EQ(paper.distractors.max_alpha_sum, 0.0f);     // no opacity limit on copies
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
@@ -728,6 +794,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.seed_after, def.resolution_schedule);   // round 7
   EXPECT_TRUE(def.distractors.seed_waits_after_reset);
   EXPECT_EQ(def.distractors.min_blend_weight, 0.0f);  // the idle cull, measured, not kept: issue17_ab.md, round 9
+  EXPECT_EQ(def.distractors.max_alpha_sum, 2.3f);     // ≈ ln 10, round 14
   EXPECT_EQ(def.distractors.refine_every_epochs, 3);  // round 4
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);

@@ -255,7 +255,7 @@ TrainingData load_training_data(const Scene& scene) {
 
 // One distractor refinement for the history: per view, the buffer before and after, the
 // growth budget, the high-gradient candidates, splits, duplicates, culls (idle_culled: by the
-// idle cull, before growth) and the
+// idle cull, before growth), the summed alpha under max_alpha_sum and the
 // distribution of mean gradient / threshold (docs/METHOD.md §7).
 json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
   json views = json::array();
@@ -270,6 +270,7 @@ json distractor_refinement_json(const StepStats& s, const Trainer& trainer) {
                      {"culled", r.report.culled},
                      {"idle_culled", r.idle},
                      {"held_back", r.report.held_back},
+                     {"alpha_sum", r.alpha_sum},
                      {"gradient_ratio_bins", r.report.gradient_ratio_bins},
                      {"static_unexplained", trainer.view_static_unexplained[r.view]},
                      {"composite_unexplained", trainer.view_composite_unexplained[r.view]}});

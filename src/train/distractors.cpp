@@ -87,6 +87,34 @@ int64_t cull_idle_distractors(TrainableGaussians& g, const Camera& camera, int f
   return culled;
 }
 
+double distractor_alpha_sum(const GaussianView& g, const Camera& camera) {
+  if (g.size() == 0) return 0.0;
+  RasterSettings rs;
+  rs.num_threads = 1;
+  RasterOutput projected;
+  rasterize_project(g, camera, rs, projected);
+  const double image = double(camera.width) * double(camera.height);
+  double sum = 0.0;
+  for (size_t i = 0; i < g.size(); ++i) {
+    if (!projected.visible[i]) continue;
+    // det Σ₂ = 1 / det(conic); ∫ o·exp(−½ dᵀ Σ₂⁻¹ d) = o·2π·√det Σ₂.
+    const double a = projected.conics[3 * i], b = projected.conics[3 * i + 1], c = projected.conics[3 * i + 2];
+    const double det_conic = a * c - b * b;
+    if (!(det_conic > 0)) continue;
+    sum += std::min(double(projected.opacity[i]) * 2.0 * M_PI / std::sqrt(det_conic), image);
+  }
+  return sum;
+}
+
+int64_t alpha_sum_budget(size_t buffer_size, double alpha_sum, double static_unexplained_fraction, int64_t pixels,
+                         const DistractorSettings& s) {
+  if (!(s.max_alpha_sum > 0.0f) || buffer_size == 0 || !(alpha_sum > 0.0)) return kUnlimitedGrowth;
+  const double limit = double(s.max_alpha_sum) * std::clamp(static_unexplained_fraction, 0.0, 1.0) * double(pixels);
+  if (alpha_sum >= limit) return 0;
+  const double per_distractor = alpha_sum / double(buffer_size);
+  return int64_t(std::floor((limit - alpha_sum) / per_distractor));
+}
+
 int64_t distractor_cap(double static_unexplained_fraction, int64_t pixels, const DistractorSettings& s) {
   if (s.pixels_per_distractor <= 0) return kUnlimitedGrowth;
   const double unexplained = std::clamp(static_unexplained_fraction, 0.0, 1.0) * double(pixels);

@@ -49,6 +49,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.seed_after = 0;  // seeding is off; stated for the record
     c.distractors.seed_waits_after_reset = false;
     c.distractors.min_blend_weight = 0.0f;  // no idle cull; the default too, stated for the record
+    c.distractors.max_alpha_sum = 0.0f;     // copies whatever the buffer's summed alpha
     c.transient_points.action = TransientPointAction::keep;
     c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
     c.appearance.test_start_from_best_look = false;  // the test-time fit from the mean look, as before

@@ -105,6 +105,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.owned_after", &c.distractors.owned_after},
       {"distractors.seed_after", &c.distractors.seed_after},
       {"distractors.min_blend_weight", &c.distractors.min_blend_weight},
+      {"distractors.max_alpha_sum", &c.distractors.max_alpha_sum},
       {"appearance.enabled", &c.appearance.enabled},
       {"appearance.image_dim", &c.appearance.image_dim},
       {"appearance.fourier_frequencies", &c.appearance.fourier_frequencies},
@@ -199,6 +200,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.owned_after", c.distractors.owned_after, 0, kBig, false, "≥ 0");
   require("distractors.seed_after", c.distractors.seed_after, 0, kBig, false, "≥ 0");
   require("distractors.min_blend_weight", c.distractors.min_blend_weight, 0, kBig, false, "≥ 0");
+  require("distractors.max_alpha_sum", c.distractors.max_alpha_sum, 0, kBig, false, "≥ 0");
   require("appearance.image_dim", c.appearance.image_dim, 1, 4096, false, "1..4096");
   require("appearance.fourier_frequencies", c.appearance.fourier_frequencies, 1, 16, false, "1..16");
   require("appearance.hidden_width", c.appearance.hidden_width, 1, 4096, false, "1..4096");

@@ -420,6 +420,11 @@ void Trainer::refine_all_distractors(int image_size, int factor, StepStats& stat
       // Idle distractors go first, so the cap's room goes to the ones the view needs.
       r.idle = cull_idle_distractors(d, downscale_camera(full, factor), factor, ds);
       r.budget = distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds);
+      if (ds.max_alpha_sum > 0) {
+        r.alpha_sum = distractor_alpha_sum(d.params.view(), full);
+        const int64_t by_alpha = alpha_sum_budget(d.size(), r.alpha_sum, view_static_unexplained[v], pixels, ds);
+        if (by_alpha != kUnlimitedGrowth && (r.budget == kUnlimitedGrowth || by_alpha < r.budget)) r.budget = by_alpha;
+      }
       r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget, scene_depth_);
       r.after = int64_t(d.size());
       stats.distractor_refine += r.report;

@@ -107,6 +107,16 @@ struct DistractorSettings {
   // scenes but lost 0.18–0.46 dB and 0.03 IoU on the clutter benchmark at 500×375
   // (docs/bench/issue17_ab.md, round 9).
   float min_blend_weight = 0.0f;
+  // Summed-alpha limit on densification (docs/METHOD.md §7): a refinement duplicates or
+  // splits a view's distractors only while their alpha summed over the image
+  // (distractor_alpha_sum, at full training resolution) is below max_alpha_sum × the pixels
+  // the static layer leaves unexplained, and adds at most as many as fill the rest at the
+  // buffer's mean alpha per distractor. Layers whose α sum to s over a pixel leave it a
+  // transmittance ≤ e^(−s): at ln 10 ≈ 2.3 it is ≥ 90 % covered, and past that a copy adds a
+  // layer, not coverage. Seeding (the starved and uncovered rules) is not limited: it goes
+  // where no distractor covers. 2.3 measured best (docs/bench/issue17_ab.md, round 14); 0: off
+  // (--preset paper).
+  float max_alpha_sum = 2.3f;
 };
 
 // K for a view of this camera's size: initial_count scaled by pixels / reference_pixels
@@ -146,6 +156,19 @@ RefineReport refine_distractors(TrainableGaussians& view_distractors, const Dens
 // below min_blend_weight. Returns how many were removed; nothing when the setting is 0.
 int64_t cull_idle_distractors(TrainableGaussians& view_distractors, const Camera& camera, int factor,
                               const DistractorSettings& settings);
+
+// Σ over the distractors visible from `camera` of their alpha integrated over the image plane,
+// o·2π·√det Σ₂ (Σ₂ the projected covariance) [pixels of `camera`]: the buffer's summed alpha
+// over all its layers. A Gaussian's integral is counted whole (at most the image's pixels),
+// also the part of it off screen.
+double distractor_alpha_sum(const GaussianView& view_distractors, const Camera& camera);
+
+// How many distractors densification may add under max_alpha_sum: kUnlimitedGrowth when the
+// setting is 0 or the buffer is empty or has no alpha; 0 when alpha_sum ≥ max_alpha_sum ·
+// (static_unexplained_fraction · pixels); else ⌊(that limit − alpha_sum) / (alpha_sum /
+// buffer_size)⌋. `pixels` and `alpha_sum` are at full training resolution.
+int64_t alpha_sum_budget(size_t buffer_size, double alpha_sum, double static_unexplained_fraction, int64_t pixels,
+                         const DistractorSettings& settings);
 
 // A view's distractor cap: static_unexplained_fraction · pixels / pixels_per_distractor
 // (rounded down; the fraction clamped to [0, 1]), with `pixels` = W·H of the view at full

@@ -163,6 +163,9 @@ struct ViewRefinement {
   int view = 0;              // index into data.train
   int64_t before = 0, after = 0, budget = kUnlimitedGrowth;
   int64_t idle = 0;          // culled first by the idle cull (cull_idle_distractors)
+  // The buffer's summed alpha before growth (distractor_alpha_sum, full training resolution
+  // [px]); measured only under distractors.max_alpha_sum, else 0.
+  double alpha_sum = 0;
   RefineReport report;
 };
 
