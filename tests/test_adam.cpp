@@ -88,6 +88,33 @@ TEST(Adam, MatchesPyTorchPerGroupAndSkipsInactiveBands) {
   }
 }
 
+// Degree 3 with two bands trained (27 of 48 colour floats): every trained float follows
+// PyTorch's Adam at its band's rate, the third band's 21 floats and moments stay as they were.
+TEST(Adam, TrainsOnlyTheActiveBandsOfADegree3Colour) {
+  std::mt19937 rng(11);
+  const size_t n = 700;
+  TrainableGaussians t(random_set(rng, n, 3));
+  const GaussianSet start = t.params;
+  LearningRates lr;
+  lr.colors_dc = 2e-3f, lr.colors_rest = 1e-4f;
+  const AdamSettings a;
+  const RasterGradients grads = random_grads(rng, t.params);
+  t.adam_update(grads, lr, a, 27);
+  for (size_t i = 0; i < n; ++i)
+    for (int c = 0; c < 48; ++c) {
+      const size_t j = 48 * i + size_t(c);
+      if (c >= 27) {
+        ASSERT_EQ(t.params.colors[j], start.colors[j]) << "row " << i << " float " << c;
+        ASSERT_EQ(t.adam_v[int(ParamGroup::Colors)][j], 0.0f) << "row " << i << " float " << c;
+        continue;
+      }
+      Reference r{double(start.colors[j])};
+      const double rate = c < 3 ? lr.colors_dc : lr.colors_rest;
+      reference_step(r, grads.colors[j], rate, 1, a);
+      ASSERT_NEAR(t.params.colors[j], r.p, 2e-6 + 1e-3 * rate) << "row " << i << " float " << c;
+    }
+}
+
 // Selective Adam: a row not selected keeps its values and both moments bit for bit; a
 // selected row follows PyTorch's Adam with the global step count (bias correction), so a
 // row skipped for a while resumes with the step count the others reached.

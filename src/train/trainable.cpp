@@ -2,6 +2,7 @@
 #include "desplat/train/trainable.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cfloat>
 #include <cmath>
 #include <stdexcept>
@@ -115,21 +116,48 @@ float TrainableGaussians::mean_gradient(size_t i, const StatisticsRules& rules, 
   return rules.normalize_each_step ? mean : mean * 0.5f * float(image_size);
 }
 
-// Elementwise and branch-free, so it vectorizes; the arithmetic is the same expression for
-// every value.
+namespace {
+// One value's Adam update; returns 1 if the value or a moment is no longer finite. Branch-free
+// (|x| <= FLT_MAX is false for ±Inf and NaN), so the loops that inline it vectorize, and every
+// loop computes the same expression.
+inline int adam_value(float& p, float& m, float& v, float g, float step_size, float sqrt_bc2, const AdamSettings& a) {
+  m = a.beta1 * m + (1 - a.beta1) * g;
+  v = a.beta2 * v + (1 - a.beta2) * g * g;
+  p -= step_size * m / (std::sqrt(v) / sqrt_bc2 + a.eps);
+  return int(!(std::abs(p) <= FLT_MAX)) | int(!(std::abs(m) <= FLT_MAX)) | int(!(std::abs(v) <= FLT_MAX));
+}
+}  // namespace
+
 bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float step_size, float sqrt_bc2,
                const AdamSettings& a) {
   int bad = 0;
 #pragma omp simd reduction(| : bad)
-  for (size_t i = 0; i < n; ++i) {
-    m[i] = a.beta1 * m[i] + (1 - a.beta1) * g[i];
-    v[i] = a.beta2 * v[i] + (1 - a.beta2) * g[i] * g[i];
-    p[i] -= step_size * m[i] / (std::sqrt(v[i]) / sqrt_bc2 + a.eps);
-    // |x| <= FLT_MAX is false for ±Inf and NaN.
-    bad |= int(!(std::abs(p[i]) <= FLT_MAX)) | int(!(std::abs(m[i]) <= FLT_MAX)) | int(!(std::abs(v[i]) <= FLT_MAX));
+  for (size_t i = 0; i < n; ++i) bad |= adam_value(p[i], m[i], v[i], g[i], step_size, sqrt_bc2, a);
+  return bad != 0;
+}
+
+namespace {
+// A Gaussian's colour floats at most: SH degree 3 (GaussianParams::validate).
+constexpr int kMaxColorFloats = 3 * 16;
+
+// The first `width` floats of each of `rows` rows of `stride` floats, the float at lane k
+// with step size lane_step[k]: one vectorized loop per row (two spans of 3 and 45 floats per
+// row would cost a call and a scalar tail each).
+bool adam_rows(float* p, float* m, float* v, const float* g, int64_t rows, int stride, int width,
+               const float* lane_step, float sqrt_bc2, const AdamSettings& a) {
+  int bad = 0;
+  for (int64_t r = 0; r < rows; ++r) {
+    const size_t o = size_t(r) * size_t(stride);
+    float* pr = p + o;
+    float* mr = m + o;
+    float* vr = v + o;
+    const float* gr = g + o;
+#pragma omp simd reduction(| : bad)
+    for (int k = 0; k < width; ++k) bad |= adam_value(pr[k], mr[k], vr[k], gr[k], lane_step[k], sqrt_bc2, a);
   }
   return bad != 0;
 }
+}  // namespace
 
 AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a) {
   ++step;
@@ -190,13 +218,11 @@ void TrainableGaussians::adam_update(const RasterGradients& grads, const Learnin
       // SH colours: the DC coefficient (3 floats) at its rate, the trained higher bands at
       // theirs. Bands above the active degree have had zero gradient since the start of the
       // run, so their moments are zero and Adam would leave them unchanged: they are skipped.
-      const int rest = std::clamp(trained_color_floats < 0 ? stride : trained_color_floats, 3, stride) - 3;
-      const float rest_step = float(lr.colors_rest / bc1);
-      for (int64_t r = 0; r < rows; ++r) {
-        const size_t o = size_t(r) * stride;
-        bad |= adam_span(p + o, m + o, v + o, grad + o, 3, step_size, sqrt_bc2, a);
-        if (rest > 0) bad |= adam_span(p + o + 3, m + o + 3, v + o + 3, grad + o + 3, rest, rest_step, sqrt_bc2, a);
-      }
+      const int trained = std::clamp(trained_color_floats < 0 ? stride : trained_color_floats, 3, stride);
+      if (trained > kMaxColorFloats) throw std::logic_error("adam_update: more colour floats than SH degree 3 has");
+      std::array<float, kMaxColorFloats> lane_step;
+      for (int k = 0; k < trained; ++k) lane_step[size_t(k)] = k < 3 ? step_size : float(lr.colors_rest / bc1);
+      bad |= adam_rows(p, m, v, grad, rows, stride, trained, lane_step.data(), sqrt_bc2, a);
     }
     return bad;
   };
