@@ -93,7 +93,7 @@ void check_sizes(size_t a, size_t b, int width, int height) {
 // Scratch for one SSIM evaluation, kept between calls (one per thread that calls the loss)
 // so a training step allocates nothing.
 struct SsimScratch {
-  std::vector<float> px, py, pxx, pyy, pxy, tmp, mx, my, exx, eyy, exy, dmx, dexx, dexy, gmx, gxx, gxy;
+  std::vector<float> px, py, pxx, pyy, pxy, tmp, mx, my, exx, eyy, exy, s, dmx, dexx, dexy, gmx, gxx, gxy;
 };
 
 // Mean SSIM over valid positions and channels; when d_x is given, adds
@@ -118,7 +118,7 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
   thread_local SsimScratch scratch;
   SsimScratch& b = scratch;  // the calling thread's; the parallel loops below share it
   for (auto* v : {&b.px, &b.py, &b.pxx, &b.pyy, &b.pxy, &b.gmx, &b.gxx, &b.gxy}) v->resize(n_in);
-  for (auto* v : {&b.mx, &b.my, &b.exx, &b.eyy, &b.exy, &b.dmx, &b.dexx, &b.dexy}) v->resize(n_out);
+  for (auto* v : {&b.mx, &b.my, &b.exx, &b.eyy, &b.exy, &b.s, &b.dmx, &b.dexx, &b.dexy}) v->resize(n_out);
   b.tmp.resize(size_t(h) * ow);
   double total = 0;
   for (int ch = 0; ch < 3; ++ch) {
@@ -134,31 +134,39 @@ double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int
     filter_valid(b.pxx.data(), w, h, b.tmp.data(), b.exx.data());
     filter_valid(b.pyy.data(), w, h, b.tmp.data(), b.eyy.data());
     filter_valid(b.pxy.data(), w, h, b.tmp.data(), b.exy.data());
-    // The per-position SSIM, summed in position order (one thread: the sum is the same
-    // whatever the thread count).
-    double channel_sum = 0;
+    // The per-position SSIM and its partials. Positions are independent, so rows go to the
+    // threads and each row vectorizes; then an ignored centre gets s = 0 and no gradient.
     const float g = float(scale / count);
-    for (size_t q = 0; q < n_out; ++q) {
-      const float kq = keep ? keep[(q / ow + kHalf) * size_t(w) + q % ow + kHalf] : 1.0f;
-      if (kq == 0) {
-        if (d_x) b.dmx[q] = b.dexx[q] = b.dexy[q] = 0;
-        continue;
+#pragma omp parallel for schedule(static)
+    for (int qy = 0; qy < oh; ++qy) {
+      const size_t row = size_t(qy) * ow;
+      const float *mx = &b.mx[row], *my = &b.my[row], *exx = &b.exx[row], *eyy = &b.eyy[row], *exy = &b.exy[row];
+      float *s_out = &b.s[row], *dmx = &b.dmx[row], *dexx = &b.dexx[row], *dexy = &b.dexy[row];
+#pragma omp simd
+      for (int qx = 0; qx < ow; ++qx) {
+        const float mux = mx[qx], muy = my[qx];
+        const float sxx = exx[qx] - mux * mux, syy = eyy[qx] - muy * muy, sxy = exy[qx] - mux * muy;
+        const float n1 = 2 * mux * muy + kC1, n2 = 2 * sxy + kC2;
+        const float d1 = mux * mux + muy * muy + kC1, d2 = sxx + syy + kC2;
+        const float s = (n1 * n2) / (d1 * d2);
+        // Partials of s in μx, σx², σxy, then through σx² = E[x²] − μx², σxy = E[xy] − μxμy.
+        const float ds_dmux = 2 * muy * n2 / (d1 * d2) - s * 2 * mux / d1;
+        const float ds_dsxx = -s / d2;
+        const float ds_dsxy = 2 * n1 / (d1 * d2);
+        s_out[qx] = s;
+        dmx[qx] = g * (ds_dmux - 2 * mux * ds_dsxx - muy * ds_dsxy);
+        dexx[qx] = g * ds_dsxx;
+        dexy[qx] = g * ds_dsxy;
       }
-      const float mux = b.mx[q], muy = b.my[q];
-      const float sxx = b.exx[q] - mux * mux, syy = b.eyy[q] - muy * muy, sxy = b.exy[q] - mux * muy;
-      const float n1 = 2 * mux * muy + kC1, n2 = 2 * sxy + kC2;
-      const float d1 = mux * mux + muy * muy + kC1, d2 = sxx + syy + kC2;
-      const float s = (n1 * n2) / (d1 * d2);
-      channel_sum += s;
-      if (!d_x) continue;
-      // Partials of s in μx, σx², σxy, then through σx² = E[x²] − μx², σxy = E[xy] − μxμy.
-      const float ds_dmux = 2 * muy * n2 / (d1 * d2) - s * 2 * mux / d1;
-      const float ds_dsxx = -s / d2;
-      const float ds_dsxy = 2 * n1 / (d1 * d2);
-      b.dmx[q] = g * (ds_dmux - 2 * mux * ds_dsxx - muy * ds_dsxy);
-      b.dexx[q] = g * ds_dsxx;
-      b.dexy[q] = g * ds_dsxy;
+      if (!keep) continue;
+      const float* keep_row = keep + size_t(qy + kHalf) * w + kHalf;
+      for (int qx = 0; qx < ow; ++qx)
+        if (keep_row[qx] == 0) s_out[qx] = dmx[qx] = dexx[qx] = dexy[qx] = 0.0f;
     }
+    // Summed in position order on one thread: the same value whatever the thread count
+    // (an ignored position adds 0, which leaves the sum's bits alone).
+    double channel_sum = 0;
+    for (size_t q = 0; q < n_out; ++q) channel_sum += b.s[q];
     total += channel_sum;
     if (!d_x) continue;
     filter_valid_transposed(b.dmx.data(), w, h, b.tmp.data(), b.gmx.data());
