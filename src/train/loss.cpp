@@ -3,6 +3,7 @@
 // goes back through the same filter transposed (a "full" scatter).
 #include "desplat/train/loss.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -25,51 +26,62 @@ struct Window {
 };
 const Window kGauss;
 
+// dst[x] = Σ_i weight[i]·src[i][x] for x in [0, count), each sum started at 0 and added in
+// tap order i = 0, 1, …, n − 1. Blocks of 16 outputs keep their sums in registers across
+// the taps (a loop over x inside each tap loads and stores dst once per tap). Every output
+// goes through the same vector loop, the last block overlapping the one before it, so each
+// sum is contracted to fused multiply-adds the same way: a scalar tail was not.
+void weighted_sum_of_rows(const float* const* src, const float* weight, int n, int count, float* dst) {
+  constexpr int kBlock = 16;
+  auto block = [&](int x, int width) {
+    float acc[kBlock] = {};
+    for (int i = 0; i < n; ++i)
+#pragma omp simd
+      for (int j = 0; j < width; ++j) acc[j] += weight[i] * src[i][x + j];
+    for (int j = 0; j < width; ++j) dst[x + j] = acc[j];
+  };
+  if (count < kBlock) return block(0, count);
+  for (int x = 0; x + kBlock <= count; x += kBlock) block(x, kBlock);
+  if (count % kBlock) block(count - kBlock, kBlock);
+}
+
 // Valid separable filtering of a planar image [h, w] → [h − 10, w − 10]. Every output
-// is Σ_k w[k]·in[…+k] summed in order k = 0…10; the loops run k outside and x inside so
-// they vectorize over x without changing that order. Rows are split over the threads.
+// is Σ_k w[k]·in[…+k] summed in order k = 0…10. Rows are split over the threads.
 void filter_valid(const float* in, int w, int h, float* tmp, float* out) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < h; ++y) {
-    float* t = tmp + size_t(y) * ow;
     const float* row = in + size_t(y) * w;
-    for (int x = 0; x < ow; ++x) t[x] = 0.0f;
-    for (int k = 0; k < kWindow; ++k)
-#pragma omp simd
-      for (int x = 0; x < ow; ++x) t[x] += kGauss.w[k] * row[x + k];
+    const float* taps[kWindow];
+    for (int k = 0; k < kWindow; ++k) taps[k] = row + k;
+    weighted_sum_of_rows(taps, kGauss.w, kWindow, ow, tmp + size_t(y) * ow);
   }
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < oh; ++y) {
-    float* o = out + size_t(y) * ow;
-    for (int x = 0; x < ow; ++x) o[x] = 0.0f;
-    for (int k = 0; k < kWindow; ++k) {
-      const float* t = tmp + size_t(y + k) * ow;
-#pragma omp simd
-      for (int x = 0; x < ow; ++x) o[x] += kGauss.w[k] * t[x];
-    }
+    const float* taps[kWindow];
+    for (int k = 0; k < kWindow; ++k) taps[k] = tmp + size_t(y + k) * ow;
+    weighted_sum_of_rows(taps, kGauss.w, kWindow, ow, out + size_t(y) * ow);
   }
 }
 
 // Transpose of filter_valid: scatters [h − 10, w − 10] back to [h, w], written as the
 // equivalent gather. Each output sums its terms in the order of their source position
-// (row-major), as the scatter would.
+// (row-major), as the scatter would: taps k = 10…0 over the valid sources.
 void filter_valid_transposed(const float* in, int w, int h, float* tmp, float* out) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
+  float reversed[kWindow];  // reversed[i] = w[10 − i]: the taps in source order
+  for (int i = 0; i < kWindow; ++i) reversed[i] = kGauss.w[kWindow - 1 - i];
   // Vertical: tmp[Y] = Σ_{y = Y−k valid} w[k]·in[y], sources y ascending (k descending).
 #pragma omp parallel for schedule(static)
   for (int Y = 0; Y < h; ++Y) {
-    float* t = tmp + size_t(Y) * ow;
-    for (int x = 0; x < ow; ++x) t[x] = 0.0f;
-    for (int k = kWindow - 1; k >= 0; --k) {
-      const int y = Y - k;
-      if (y < 0 || y >= oh) continue;
-      const float* src = in + size_t(y) * ow;
-#pragma omp simd
-      for (int x = 0; x < ow; ++x) t[x] += kGauss.w[k] * src[x];
-    }
+    const int k_hi = std::min(kWindow - 1, Y), k_lo = std::max(0, Y - (oh - 1));
+    const float* taps[kWindow];
+    for (int k = k_hi; k >= k_lo; --k) taps[k_hi - k] = in + size_t(Y - k) * ow;
+    weighted_sum_of_rows(taps, reversed + (kWindow - 1 - k_hi), k_hi - k_lo + 1, ow, tmp + size_t(Y) * ow);
   }
   // Horizontal: out[X] = Σ_{x = X−k valid} w[k]·tmp[x], sources x ascending (k descending).
+  // Still one pass per tap: a blocked form, with its edge columns summed one by one, changed
+  // the gradient's bits (not traced; docs/bench/issue16_speed.md).
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < h; ++y) {
     float* o = out + size_t(y) * w;
