@@ -160,6 +160,8 @@ void run(benchmark::State& state, bool backward) {
   }
   state.counters["gaussians"] = double(scene.gaussians.size());
   state.counters["pairs"] = benchmark::Counter(double(out.evaluated_pairs));
+  // (tile, Gaussian) entries: each costs a fixed setup in both tile passes.
+  state.counters["entries"] = benchmark::Counter(double(out.tile_entries.size()));
   // Seconds per evaluated pair (printed with an SI prefix, e.g. "6.1n" = 6.1 ns).
   state.counters["time_per_pair"] =
       benchmark::Counter(double(pairs), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);

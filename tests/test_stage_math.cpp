@@ -183,10 +183,11 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
         box_halves_in_tile(mx, rx, x0, kTileSize, h0, h1);
         if (h0 > h1 || r0 > r1) continue;
         const RowChords chords(mx, a, b, c, o, rx, ry, x0, h0, h1);
+        int32_t row_h0[kTileSize], row_h1[kTileSize];
+        chords.row_halves(my, y0, row_h0, row_h1);
         for (int r = r0; r <= r1; ++r) {
           const float dy = my - (y0 + r + 0.5f);
-          int rh0, rh1;
-          chords.halves(dy, rh0, rh1);
+          const int rh0 = row_h0[r], rh1 = row_h1[r];
           for (int h = h0; h <= h1; ++h) {
             bool blended = false, clearly_outside = true;
             for (int col = h * kHalfTile; col < (h + 1) * kHalfTile; ++col) {
@@ -220,10 +221,14 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
 TEST(RowChords, PassTheBoxThroughWhenTheConicIsNotPositiveDefinite) {
   for (const float a : {0.0f, -1.0f, NAN}) {
     const RowChords chords(8.0f, a, 0.0f, 1.0f, 0.5f, 20, 20, 0, 0, 1);
-    int rh0 = -5, rh1 = -5;
-    chords.halves(3.0f, rh0, rh1);
-    EXPECT_EQ(rh0, 0);
-    EXPECT_EQ(rh1, 1);
+    int32_t rh0[kTileSize], rh1[kTileSize];
+    std::fill(rh0, rh0 + kTileSize, -5);
+    std::fill(rh1, rh1 + kTileSize, -5);
+    chords.row_halves(8.0f, 0, rh0, rh1);
+    for (int r = 0; r < kTileSize; ++r) {
+      EXPECT_EQ(rh0[r], 0) << "row " << r;
+      EXPECT_EQ(rh1[r], 1) << "row " << r;
+    }
   }
 }
 

@@ -64,11 +64,12 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     const RowChords chords(mx, a, b, c, o, out.blend_radii[2 * g], out.blend_radii[2 * g + 1], x0, h0, h1);
     // Pixels that stopped at this entry, per column; summed once per entry rather than per row.
     alignas(64) int32_t finished[S] = {};
+    alignas(64) int32_t row_h0[S], row_h1[S];
+    chords.row_halves(my, y0, row_h0, row_h1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-      int rh0, rh1;
-      chords.halves(dy, rh0, rh1);
+      const int rh0 = row_h0[r], rh1 = row_h1[r];
       if (rh0 > rh1) continue;
       evaluated += (rh1 - rh0 + 1) * kHalfTile;
       for_each_span(rh0, rh1, [&](auto width, int first) {
@@ -167,11 +168,12 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
     box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
     const RowChords chords(mx, a, b, c, o, fw.blend_radii[2 * g], fw.blend_radii[2 * g + 1], x0, h0, h1);
+    alignas(64) int32_t row_h0[S], row_h1[S];
+    chords.row_halves(my, y0, row_h0, row_h1);
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
-      int rh0, rh1;
-      chords.halves(dy, rh0, rh1);
+      const int rh0 = row_h0[r], rh1 = row_h1[r];
       if (rh0 > rh1) continue;
       for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <omp.h>
 
@@ -58,8 +59,9 @@ inline void box_halves_in_tile(float mx, int rx, int x0, int cols, int& h0, int&
 // rows empty, and the loops skip it. Exact: a skipped half holds no pixel the loops would
 // blend (tests/test_stage_math.cpp checks it against the loops' own float σ). Built once
 // per tile entry, in double, with s widened by a bound on the loops' float error in σ (a
-// few units of roundoff of its largest term within the box); per row it costs one float
-// square root. Rows of a box within one half gain only when the chord misses them whole.
+// few units of roundoff of its largest term within the box); the rows of a tile then cost
+// one vector pass of float square roots (row_halves). Rows of a box within one half gain
+// only when the chord misses them whole.
 class RowChords {
  public:
   RowChords(float mx, float a, float b, float c, float opacity, int rx, int ry, int x0, int h0, int h1)
@@ -77,23 +79,31 @@ class RowChords {
     pad_ = float(0.01 + 1e-5 * std::sqrt(std::max(reach, 0.0)));
     if (!(level > 0.0) || !std::isfinite(reach) || !std::isfinite(curvature_)) used_ = false;
   }
-  // The halves [rh0, rh1] of the row at dy = my − (its pixel centres' y), as the loops compute it
-  // (rh0 > rh1: none).
-  void halves(float dy, int& rh0, int& rh1) const {
-    rh0 = h0_, rh1 = h1_;
-    if (!used_) return;
-    const float t = curvature_ * dy * dy + reach_;
-    if (t < 0.0f) {
-      rh1 = rh0 - 1;
+  // The halves [rh0[r], rh1[r]] of every row r of a tile starting at pixel row y0, with
+  // dy = my − (y0 + r + 0.5) as the loops compute it (rh0[r] > rh1[r]: none). All kTileSize
+  // rows at once, branch-free, so the row loop reads a table instead of running a scalar
+  // square root and a chain of compares per row (rows the box misses are filled too).
+  [[gnu::always_inline]] void row_halves(float my, int y0, int32_t* rh0, int32_t* rh1) const {
+    if (!used_) {
+      std::fill(rh0, rh0 + kTileSize, h0_);
+      std::fill(rh1, rh1 + kTileSize, h1_);
       return;
     }
-    const float half_width = std::sqrt(t) + pad_, mid = centre_ + slope_ * dy;
-    // Columns hold centres at 0, 1, …: the chord's first and last column.
-    const float lo = std::ceil(mid - half_width), hi = std::floor(mid + half_width);
-    const bool first = lo <= float(kHalfTile - 1) && hi >= 0.0f && lo <= hi;
-    const bool second = lo <= float(kTileSize - 1) && hi >= float(kHalfTile) && lo <= hi;
-    rh0 = std::max(h0_, first ? 0 : 1);
-    rh1 = std::min(h1_, second ? 1 : 0);
+#pragma omp simd
+    for (int r = 0; r < kTileSize; ++r) {
+      const float dy = my - (y0 + r + 0.5f);
+      const float t = curvature_ * dy * dy + reach_;
+      // t < 0: the row misses the ellipse (its square root is NaN, and every compare
+      // below with it is false too).
+      const float half_width = std::sqrt(t) + pad_, mid = centre_ + slope_ * dy;
+      // Columns hold centres at 0, 1, …: the chord's first and last column.
+      const float lo = std::ceil(mid - half_width), hi = std::floor(mid + half_width);
+      const int32_t chord = int32_t(t >= 0.0f) & int32_t(lo <= hi);
+      const int32_t first = chord & int32_t(lo <= float(kHalfTile - 1)) & int32_t(hi >= 0.0f);
+      const int32_t second = chord & int32_t(lo <= float(kTileSize - 1)) & int32_t(hi >= float(kHalfTile));
+      rh0[r] = std::max(h0_, 1 - first);
+      rh1[r] = std::min(h1_, second);
+    }
   }
 
  private:
