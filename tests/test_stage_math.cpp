@@ -182,7 +182,9 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
         box_rows_in_tile(my, ry, y0, kTileSize, r0, r1);
         box_halves_in_tile(mx, rx, x0, kTileSize, h0, h1);
         if (h0 > h1 || r0 > r1) continue;
-        const RowChords chords(mx, a, b, c, o, rx, ry, x0, h0, h1);
+        float shape[kChordFloats];
+        chord_shape(a, b, c, o, rx, ry, shape);
+        const RowChords chords(shape, mx, x0, h0, h1);
         int32_t row_h0[kTileSize], row_h1[kTileSize];
         chords.row_halves(my, y0, row_h0, row_h1);
         for (int r = r0; r <= r1; ++r) {
@@ -220,7 +222,9 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
 // A conic that is not positive definite (a ≤ 0, or NaN) gives no chord: the box's halves pass through.
 TEST(RowChords, PassTheBoxThroughWhenTheConicIsNotPositiveDefinite) {
   for (const float a : {0.0f, -1.0f, NAN}) {
-    const RowChords chords(8.0f, a, 0.0f, 1.0f, 0.5f, 20, 20, 0, 0, 1);
+    float shape[kChordFloats];
+    chord_shape(a, 0.0f, 1.0f, 0.5f, 20, 20, shape);
+    const RowChords chords(shape, 8.0f, 0, 0, 1);
     int32_t rh0[kTileSize], rh1[kTileSize];
     std::fill(rh0, rh0 + kTileSize, -5);
     std::fill(rh1, rh1 + kTileSize, -5);

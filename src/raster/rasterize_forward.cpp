@@ -71,6 +71,8 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     const float k = opacity_extent_sigmas(opacity);
     out.blend_radii[2 * i] = static_cast<int32_t>(std::min(rx, std::ceil(k * std::sqrt(proj.cov2d(0, 0)))));
     out.blend_radii[2 * i + 1] = static_cast<int32_t>(std::min(ry, std::ceil(k * std::sqrt(proj.cov2d(1, 1)))));
+    chord_shape(conic[0], conic[1], conic[2], opacity, out.blend_radii[2 * i], out.blend_radii[2 * i + 1],
+                &out.chords[kChordFloats * i]);
     out.depths[i] = p[2];
     out.opacity[i] = opacity;
     for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
@@ -171,6 +173,7 @@ void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSet
   out.opacity.assign(n, 0.0f);
   out.color_clamped.assign(3 * n, 0);
   out.blend_radii.assign(2 * n, 0);
+  out.chords.assign(kChordFloats * n, 0.0f);
   preprocess(g, cam, s, sh_degree, out);
 }
 

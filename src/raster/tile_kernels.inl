@@ -61,7 +61,7 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
     box_halves_in_tile(mx, out.blend_radii[2 * g], x0, cols, h0, h1);
     if (h0 > h1) continue;
-    const RowChords chords(mx, a, b, c, o, out.blend_radii[2 * g], out.blend_radii[2 * g + 1], x0, h0, h1);
+    const RowChords chords(&out.chords[kChordFloats * g], mx, x0, h0, h1);
     // Pixels that stopped at this entry, per column; summed once per entry rather than per row.
     alignas(64) int32_t finished[S] = {};
     alignas(64) int32_t row_h0[S], row_h1[S];
@@ -167,7 +167,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     int r0, r1, h0, h1;
     box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
     box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
-    const RowChords chords(mx, a, b, c, o, fw.blend_radii[2 * g], fw.blend_radii[2 * g + 1], x0, h0, h1);
+    const RowChords chords(&fw.chords[kChordFloats * g], mx, x0, h0, h1);
     alignas(64) int32_t row_h0[S], row_h1[S];
     chords.row_halves(my, y0, row_h0, row_h1);
     for (int r = r0; r <= r1; ++r) {

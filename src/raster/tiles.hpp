@@ -57,27 +57,40 @@ inline void box_halves_in_tile(float mx, int rx, int x0, int cols, int& h0, int&
 // loops compute them and s = ln(255·o) + 0.01 (opacity_extent_sigmas' margin). The box is
 // the ellipse's bounding rectangle, so a tilted or thin ellipse leaves one half of many
 // rows empty, and the loops skip it. Exact: a skipped half holds no pixel the loops would
-// blend (tests/test_stage_math.cpp checks it against the loops' own float σ). Built once
-// per tile entry, in double, with s widened by a bound on the loops' float error in σ (a
-// few units of roundoff of its largest term within the box); the rows of a tile then cost
-// one vector pass of float square roots (row_halves). Rows of a box within one half gain
-// only when the chord misses them whole.
+// blend (tests/test_stage_math.cpp checks it against the loops' own float σ). The shape is
+// built once per Gaussian (chord_shape, in double, with s widened by a bound on the loops'
+// float error in σ: a few units of roundoff of its largest term within the box) and stored
+// with the projection (RasterOutput::chords); each tile entry then places it (RowChords) and
+// its rows cost one vector pass of float square roots (row_halves). Rows of a box within
+// one half gain only when the chord misses them whole.
+constexpr int kChordFloats = 4;  // slope, curvature, reach, pad; reach NaN: no chord
+
+// For row dy the chord is px ∈ mx + slope·dy ± (√(curvature·dy² + reach) + pad), with
+// slope = b/a, curvature = (b² − ac)/a², reach = 2·level/a. rx, ry: the blend box [px].
+inline void chord_shape(float a, float b, float c, float opacity, int rx, int ry, float* shape) {
+  shape[0] = shape[1] = shape[3] = 0.0f;
+  shape[2] = NAN;
+  if (!(a > 0.0f)) return;
+  const double ad = a, bd = b, cd = c, px = double(rx) + 1.0, py = double(ry) + 1.0;
+  const double largest = 0.5 * ad * px * px + std::abs(bd) * px * py + 0.5 * cd * py * py;
+  const double level = std::log(255.0 * double(opacity)) + 0.01 + 2e-6 * largest;
+  const double reach = 2.0 * level / ad;
+  const float curvature = float((bd * bd - ad * cd) / (ad * ad));
+  if (!(level > 0.0) || !std::isfinite(reach) || !std::isfinite(curvature)) return;
+  shape[0] = float(bd / ad);
+  shape[1] = curvature;
+  shape[2] = float(reach * (1.0 + 1e-5));  // the float evaluation cancels up to ~1e-7·reach
+  shape[3] = float(0.01 + 1e-5 * std::sqrt(reach));
+}
+
+// One Gaussian's chord shape placed in one tile: centre mx, tile column x0, box halves [h0, h1].
 class RowChords {
  public:
-  RowChords(float mx, float a, float b, float c, float opacity, int rx, int ry, int x0, int h0, int h1)
-      : h0_(h0), h1_(h1), used_(h0 <= h1 && a > 0.0f) {
+  RowChords(const float* shape, float mx, int x0, int h0, int h1)
+      : h0_(h0), h1_(h1), used_(h0 <= h1 && shape[2] > 0.0f) {
     if (!used_) return;
-    const double ad = a, bd = b, cd = c, px = double(rx) + 1.0, py = double(ry) + 1.0;
-    const double largest = 0.5 * ad * px * px + std::abs(bd) * px * py + 0.5 * cd * py * py;
-    const double level = std::log(255.0 * double(opacity)) + 0.01 + 2e-6 * largest;
-    // For row dy the chord is px ∈ mx + (b/a)·dy ± √((b² − ac)/a²·dy² + 2·level/a).
-    slope_ = float(bd / ad);
-    curvature_ = float((bd * bd - ad * cd) / (ad * ad));
-    const double reach = 2.0 * level / ad;
-    reach_ = float(reach * (1.0 + 1e-5));  // the float evaluation below cancels up to ~1e-7·reach
+    slope_ = shape[0], curvature_ = shape[1], reach_ = shape[2], pad_ = shape[3];
     centre_ = float(double(mx) - x0 - 0.5);  // column coordinate of the centre
-    pad_ = float(0.01 + 1e-5 * std::sqrt(std::max(reach, 0.0)));
-    if (!(level > 0.0) || !std::isfinite(reach) || !std::isfinite(curvature_)) used_ = false;
   }
   // The halves [rh0[r], rh1[r]] of every row r of a tile starting at pixel row y0, with
   // dy = my − (y0 + r + 0.5) as the loops compute it (rh0[r] > rh1[r]: none). All kTileSize

@@ -96,6 +96,8 @@ struct RasterOutput {
   std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
   std::vector<int32_t> blend_radii;       // [N, 2] the extent [px] in which α can reach 1/255
                                           // (≤ radii; opacity-dependent): tiles and rows visited
+  std::vector<float> chords;              // [N, 4] the ellipse's row chords within that box
+                                          // (src/raster/tiles.hpp, chord_shape)
   std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
   std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
   std::vector<int32_t> gaussian_offsets;  // [N + 1] CSR offsets into entry_of_gaussian
