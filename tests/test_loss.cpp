@@ -86,6 +86,15 @@ TEST(Loss, IdenticalImagesHaveSsimOneAndInfinitePsnr) {
   EXPECT_NEAR(psnr(shifted, im.target), 20.0, 1e-4);
 }
 
+// PSNR reads RGB images: a buffer that is not 3 floats per pixel is an error, not a
+// PSNR over a silently dropped tail.
+TEST(Loss, PsnrOfImagesThatAreNotRgbIsAnError) {
+  const std::vector<float> a(10, 0.5f), b(10, 0.25f);
+  EXPECT_THROW(psnr(a, b), std::invalid_argument);
+  EXPECT_NEAR(psnr(std::span<const float>(a).first(9), std::span<const float>(b).first(9)),
+              -10.0 * std::log10(0.0625), 1e-9);
+}
+
 TEST(Loss, GradientMatchesFiniteDifferences) {
   const int w = 17, h = 14;
   const Images im = random_images(w, h, 9);

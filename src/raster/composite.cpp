@@ -29,6 +29,7 @@ void composite_layers(Layer s, Layer d, const Background& bg, std::span<float> o
   check_background(bg, pixels);
   if (out.size() != 3 * pixels) throw std::invalid_argument("composite: output size disagrees with the layers");
   const bool with_d = has(d);
+#pragma omp parallel for schedule(static)
   for (size_t p = 0; p < pixels; ++p) {
     const float ad = with_d ? d.alpha[p] : 0.0f;
     for (int c = 0; c < 3; ++c) {
@@ -49,6 +50,7 @@ void composite_layers_backward(Layer s, Layer d, const Background& bg, std::span
       (with_d && (g.distractor_color.size() != 3 * pixels || g.distractor_alpha.size() != pixels)) ||
       (with_bg && g.background.size() != 3 * pixels))
     throw std::invalid_argument("composite backward: gradient buffer sizes disagree with the layers");
+#pragma omp parallel for schedule(static)
   for (size_t p = 0; p < pixels; ++p) {
     const float as = s.alpha[p], ad = with_d ? d.alpha[p] : 0.0f;
     float d_as = 0, d_ad = 0;
@@ -86,17 +88,16 @@ double alpha_regularizers(Layer s, Layer d, float lambda_s, float lambda_d, std:
   }
   double sum_s = 0, sum_d = 0;
   const float gs = -lambda_s / float(kept), gd = lambda_d / float(kept);
-  for (size_t p = 0; p < pixels; ++p) {
-    const float k = keep.empty() ? 1.0f : keep[p];
-    sum_s += k * (1.0 - s.alpha[p]);
-    d_as[p] += k * gs;
+  auto k_at = [&](size_t p) { return keep.empty() ? 1.0f : keep[p]; };
+  // The gradients per pixel on the threads; the reported sums in pixel order.
+#pragma omp parallel for schedule(static)
+  for (size_t p = 0; p < pixels; ++p) d_as[p] += k_at(p) * gs;
+  for (size_t p = 0; p < pixels; ++p) sum_s += k_at(p) * (1.0 - s.alpha[p]);
+  if (has(d)) {
+#pragma omp parallel for schedule(static)
+    for (size_t p = 0; p < pixels; ++p) d_ad[p] += k_at(p) * gd;
+    for (size_t p = 0; p < pixels; ++p) sum_d += k_at(p) * d.alpha[p];
   }
-  if (has(d))
-    for (size_t p = 0; p < pixels; ++p) {
-      const float k = keep.empty() ? 1.0f : keep[p];
-      sum_d += k * d.alpha[p];
-      d_ad[p] += k * gd;
-    }
   return (lambda_s * sum_s + lambda_d * sum_d) / kept;
 }
 

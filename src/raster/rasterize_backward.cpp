@@ -36,14 +36,15 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   check(rgb_scale, 3 * n, "rgb_scale");
 
   const int color_stride = g.color_floats_per_gaussian();
-  grads.means.assign(3 * n, 0.0f);
-  grads.log_scales.assign(3 * n, 0.0f);
-  grads.quats.assign(4 * n, 0.0f);
-  grads.opacity_logits.assign(n, 0.0f);
-  grads.colors.assign(color_stride * n, 0.0f);
-  grads.means2d.assign(2 * n, 0.0f);
-  grads.absgrad.assign(n, 0.0f);
-  grads.rgb.assign(3 * n, 0.0f);
+  // Sized here, zeroed row by row on the threads in the per-Gaussian loop below.
+  grads.means.resize(3 * n);
+  grads.log_scales.resize(3 * n);
+  grads.quats.resize(4 * n);
+  grads.opacity_logits.resize(n);
+  grads.colors.resize(color_stride * n);
+  grads.means2d.resize(2 * n);
+  grads.absgrad.resize(n);
+  grads.rgb.resize(3 * n);
 
   const TileGrid grid(cam.width, cam.height);
   grads.entry_scratch.resize(fw.tile_entries.size() * kEntrySlots);
@@ -67,6 +68,15 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
 
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(n); ++i) {
+    // Zero the row first: an invisible Gaussian's gradient is zero, and the chain rule
+    // below adds into the colour, scale and rotation gradients.
+    std::fill_n(&grads.means[3 * i], 3, 0.0f);
+    std::fill_n(&grads.log_scales[3 * i], 3, 0.0f);
+    std::fill_n(&grads.quats[4 * i], 4, 0.0f);
+    std::fill_n(&grads.colors[color_stride * i], color_stride, 0.0f);
+    std::fill_n(&grads.means2d[2 * i], 2, 0.0f);
+    std::fill_n(&grads.rgb[3 * i], 3, 0.0f);
+    grads.opacity_logits[i] = grads.absgrad[i] = 0.0f;
     if (!fw.visible[i]) continue;
     // A fixed-size array so the 12 slots add as three 4-wide vectors (a plain loop compiled
     // to scalar adds); each slot still sums its entries in the same order, so the bits hold.

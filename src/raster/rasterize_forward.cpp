@@ -37,9 +37,14 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
 
 #pragma omp parallel for num_threads(thread_count(s)) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
+    // An invisible Gaussian's entries are zero (raster.hpp); a visible one's are all set below.
     out.radii[2 * i] = out.radii[2 * i + 1] = 0;
     out.blend_radii[2 * i] = out.blend_radii[2 * i + 1] = 0;
     out.visible[i] = 0;
+    out.means2d[2 * i] = out.means2d[2 * i + 1] = 0.0f;
+    for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = out.rgb[3 * i + k] = 0.0f, out.color_clamped[3 * i + k] = 0;
+    for (int k = 0; k < kChordFloats; ++k) out.chords[kChordFloats * i + k] = 0.0f;
+    out.depths[i] = out.opacity[i] = 0.0f;
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     const Vec3<float> p = W * mean + t;
     if (!(p[2] > s.near_plane && p[2] < s.far_plane)) continue;  // also rejects NaN
@@ -103,26 +108,44 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     out.gaussian_offsets[i + 1] = out.visible[i] ? rect_of(i).area() : 0;
   }
   // Depth is > near > 0, so its float bits order like the value: (bits << 32 | id)
-  // sorts by depth, then id, with plain integer compares.
-  std::vector<uint64_t> keys;
-  keys.reserve(n);
-  for (int64_t i = 0; i < n; ++i)
-    if (out.visible[i]) keys.push_back(uint64_t(std::bit_cast<uint32_t>(out.depths[i])) << 32 | uint64_t(i));
-  std::sort(keys.begin(), keys.end());
+  // sorts by depth, then id, with plain integer compares. The keys are unique, so sorting
+  // contiguous chunks of ids on the threads and merging them gives the one sorted order
+  // whatever the thread count; each chunk also counts its Gaussians' entries per tile.
+  const int chunks = std::max(1, threads);
+  const int tiles = grid.count();
+  std::vector<std::vector<uint64_t>> chunk_keys(chunks);
+  std::vector<int32_t> chunk_counts(size_t(chunks) * tiles, 0);
+#pragma omp parallel for num_threads(threads) schedule(static, 1)
+  for (int ch = 0; ch < chunks; ++ch) {
+    const int64_t lo = n * ch / chunks, hi = n * (ch + 1) / chunks;
+    std::vector<uint64_t>& keys = chunk_keys[ch];
+    keys.reserve(size_t(hi - lo));
+    int32_t* counts = &chunk_counts[size_t(ch) * tiles];
+    for (int64_t i = lo; i < hi; ++i) {
+      if (!out.visible[i]) continue;
+      keys.push_back(uint64_t(std::bit_cast<uint32_t>(out.depths[i])) << 32 | uint64_t(i));
+      const TileRect r = rect_of(i);
+      for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * grid.tiles_x + tx];
+    }
+    std::sort(keys.begin(), keys.end());
+  }
+  std::vector<uint64_t> keys = std::move(chunk_keys[0]), merged;
+  for (int ch = 1; ch < chunks; ++ch) {
+    merged.resize(keys.size() + chunk_keys[ch].size());
+    std::merge(keys.begin(), keys.end(), chunk_keys[ch].begin(), chunk_keys[ch].end(), merged.begin());
+    keys.swap(merged);
+  }
   std::vector<int32_t> order(keys.size());
   for (size_t k = 0; k < keys.size(); ++k) order[k] = static_cast<int32_t>(keys[k] & 0xffffffffu);
   std::partial_sum(out.gaussian_offsets.begin(), out.gaussian_offsets.end(), out.gaussian_offsets.begin());
   const int64_t entries = out.gaussian_offsets[n];
   if (entries > INT32_MAX) throw std::runtime_error("too many tile–Gaussian intersections");
 
-  // Tile counts, then CSR offsets.
-  out.tile_offsets.assign(grid.count() + 1, 0);
-  for (int64_t i = 0; i < n; ++i) {
-    if (!out.visible[i]) continue;
-    const TileRect r = rect_of(i);
-    for (int ty = r.y0; ty < r.y1; ++ty)
-      for (int tx = r.x0; tx < r.x1; ++tx) ++out.tile_offsets[ty * grid.tiles_x + tx + 1];
-  }
+  // Tile counts (summed over the chunks), then CSR offsets.
+  out.tile_offsets.assign(tiles + 1, 0);
+  for (int ch = 0; ch < chunks; ++ch)
+    for (int t = 0; t < tiles; ++t) out.tile_offsets[t + 1] += chunk_counts[size_t(ch) * tiles + t];
   std::partial_sum(out.tile_offsets.begin(), out.tile_offsets.end(), out.tile_offsets.begin());
   out.tile_entries.resize(entries);
   out.entry_of_gaussian.resize(entries);
@@ -164,28 +187,30 @@ void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSet
   const size_t n = g.size();
   out.width = cam.width;
   out.height = cam.height;
-  out.means2d.assign(2 * n, 0.0f);
-  out.conics.assign(3 * n, 0.0f);
-  out.radii.assign(2 * n, 0);
-  out.depths.assign(n, 0.0f);
-  out.visible.assign(n, 0);
-  out.rgb.assign(3 * n, 0.0f);
-  out.opacity.assign(n, 0.0f);
-  out.color_clamped.assign(3 * n, 0);
-  out.blend_radii.assign(2 * n, 0);
-  out.chords.assign(kChordFloats * n, 0.0f);
+  // Sized here, filled on the threads by preprocess (every entry of every Gaussian).
+  out.means2d.resize(2 * n);
+  out.conics.resize(3 * n);
+  out.radii.resize(2 * n);
+  out.depths.resize(n);
+  out.visible.resize(n);
+  out.rgb.resize(3 * n);
+  out.opacity.resize(n);
+  out.color_clamped.resize(3 * n);
+  out.blend_radii.resize(2 * n);
+  out.chords.resize(kChordFloats * n);
   preprocess(g, cam, s, sh_degree, out);
 }
 
 void rasterize_blend(const Camera& cam, const RasterSettings& s, RasterOutput& out) {
   if (out.width != cam.width || out.height != cam.height)
     throw std::invalid_argument("rasterize_blend: the projection was made for another image size");
+  // Every pixel belongs to one tile and blend_tile writes all of them: no fill needed.
   const size_t pixels = size_t(cam.width) * cam.height;
-  out.color.assign(3 * pixels, 0.0f);
-  out.alpha.assign(pixels, 0.0f);
-  out.depth.assign(pixels, 0.0f);
-  out.final_transmittance.assign(pixels, 1.0f);
-  out.last_contributor.assign(pixels, -1);
+  out.color.resize(3 * pixels);
+  out.alpha.resize(pixels);
+  out.depth.resize(pixels);
+  out.final_transmittance.resize(pixels);
+  out.last_contributor.resize(pixels);
   out.isa = resolve_kernel_isa(s.isa);
   const TileKernels& kernels = tile_kernels(out.isa);
   const TileGrid grid(cam.width, cam.height);

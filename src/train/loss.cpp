@@ -218,16 +218,17 @@ PhotometricLoss photometric_loss(std::span<const float> render, std::span<const 
     for (float k : keep) n += 3 * double(k);
   }
   const float l1_scale = n > 0 ? float((1.0 - ssim_lambda) / n) : 0.0f;
-  double l1 = 0;
   // An ignored pixel's difference counts as 0: no L1, no gradient.
-  auto l1_term = [&](size_t i, float diff) {
-    l1 += std::abs(diff);
-    if (grad) d_render[i] = diff > 0 ? l1_scale : (diff < 0 ? -l1_scale : 0.0f);
-  };
-  if (keep.empty())
-    for (size_t i = 0; i < render.size(); ++i) l1_term(i, render[i] - target[i]);
-  else
-    for (size_t i = 0; i < render.size(); ++i) l1_term(i, keep[i / 3] * (render[i] - target[i]));
+  auto diff_at = [&](size_t i) { return keep.empty() ? render[i] - target[i] : keep[i / 3] * (render[i] - target[i]); };
+  if (grad) {
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < render.size(); ++i) {
+      const float diff = diff_at(i);
+      d_render[i] = diff > 0 ? l1_scale : (diff < 0 ? -l1_scale : 0.0f);
+    }
+  }
+  double l1 = 0;  // the reported value: one sum in pixel order
+  for (size_t i = 0; i < render.size(); ++i) l1 += std::abs(diff_at(i));
   l1 = n > 0 ? l1 / n : 0.0;
   // loss contains −λ·SSIM, so SSIM's gradient enters with scale −λ.
   const double s = ssim_and_gradient(render, target, width, height, -ssim_lambda, grad ? d_render.data() : nullptr,
@@ -243,12 +244,15 @@ double ssim(std::span<const float> a, std::span<const float> b, int width, int h
 
 double psnr(std::span<const float> a, std::span<const float> b, std::span<const float> keep) {
   if (a.size() != b.size() || a.empty()) throw std::invalid_argument("psnr: image sizes differ or are empty");
+  if (a.size() % 3 != 0) throw std::invalid_argument("psnr: the images are not RGB (3 floats per pixel)");
   check_keep(keep, a.size() / 3);
   double mse = 0, n = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    const double k = keep.empty() ? 1.0 : keep[i / 3];
-    mse += k * double(a[i] - b[i]) * (a[i] - b[i]);
-    n += k;
+  for (size_t p = 0; p < a.size() / 3; ++p) {
+    const double k = keep.empty() ? 1.0 : keep[p];
+    for (size_t i = 3 * p; i < 3 * p + 3; ++i) {
+      mse += k * double(a[i] - b[i]) * (a[i] - b[i]);
+      n += k;
+    }
   }
   if (n == 0) return INFINITY;  // nothing kept: nothing differs
   mse /= n;

@@ -21,20 +21,33 @@ double mask_total_variation(std::span<const float> alpha, int width, int height,
     if (kept == 0) return 0;
   }
   const float g = lambda / float(kept);
-  double sum = 0;
-  auto pair = [&](size_t p, size_t q) {
-    if (!keep.empty() && (keep[p] == 0 || keep[q] == 0)) return;
+  // Each pair of neighbours (p, q) adds sign(α_p − α_q)·g to p's gradient and subtracts it
+  // from q's, unless the user's mask drops either pixel.
+  auto counted = [&](size_t p, size_t q) { return keep.empty() || (keep[p] != 0 && keep[q] != 0); };
+  auto step = [&](size_t p, size_t q) {
     const float diff = alpha[p] - alpha[q];
-    sum += std::abs(double(diff));
-    const float s = diff > 0 ? g : diff < 0 ? -g : 0.0f;
-    d_alpha[p] += s;
-    d_alpha[q] -= s;
+    return diff > 0 ? g : diff < 0 ? -g : 0.0f;
   };
+  // Gathered per pixel on the threads, in the order a walk over the pairs row by row would
+  // add them (the pair above, the one to the left, then its own right and down pairs).
+  const size_t w = size_t(width);
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
-      const size_t p = size_t(y) * size_t(width) + size_t(x);
-      if (x + 1 < width) pair(p, p + 1);
-      if (y + 1 < height) pair(p, p + size_t(width));
+      const size_t p = size_t(y) * w + size_t(x);
+      float d = d_alpha[p];
+      if (y > 0 && counted(p - w, p)) d -= step(p - w, p);
+      if (x > 0 && counted(p - 1, p)) d -= step(p - 1, p);
+      if (x + 1 < width && counted(p, p + 1)) d += step(p, p + 1);
+      if (y + 1 < height && counted(p, p + w)) d += step(p, p + w);
+      d_alpha[p] = d;
+    }
+  double sum = 0;  // the reported value: one sum in pair order
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const size_t p = size_t(y) * w + size_t(x);
+      if (x + 1 < width && counted(p, p + 1)) sum += std::abs(double(alpha[p] - alpha[p + 1]));
+      if (y + 1 < height && counted(p, p + w)) sum += std::abs(double(alpha[p] - alpha[p + w]));
     }
   return double(lambda) * sum / kept;
 }

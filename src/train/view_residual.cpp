@@ -47,9 +47,13 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
   ViewResidual r;
   r.pixels = int64_t(pixels);
   if (!keep.empty()) r.pixels = std::count_if(keep.begin(), keep.end(), [](float k) { return k > 0; });
+  // Per pixel on the threads (integer counts: the same sums in any order).
+  int64_t static_unexplained = 0, composite_unexplained = 0;
+  uint8_t* const cls_of = cls.data();  // thread_local: each thread would see its own vector
+#pragma omp parallel for schedule(static) reduction(+ : static_unexplained, composite_unexplained)
   for (size_t p = 0; p < pixels; ++p) {
     if (!keep.empty() && keep[p] == 0) {  // ignored by the user: neither explained nor not
-      cls[p] = kIgnored;
+      cls_of[p] = kIgnored;
       if (mask) (*mask)[p] = 0;
       continue;
     }
@@ -62,12 +66,13 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
     }
     // NaN counts as unexplained: !(err < tol).
     const bool static_explains = static_err < 3.0f * tolerance;
-    r.static_unexplained += !static_explains;
+    static_unexplained += !static_explains;
     const bool composite_explains = composite_err < 3.0f * tolerance;
-    r.composite_unexplained += !composite_explains;
+    composite_unexplained += !composite_explains;
     if (mask) (*mask)[p] = !static_explains && !composite_explains;
-    cls[p] = uint8_t((static_explains ? kStaticExplains : 0) | (composite_explains ? kCompositeExplains : 0));
+    cls_of[p] = uint8_t((static_explains ? kStaticExplains : 0) | (composite_explains ? kCompositeExplains : 0));
   }
+  r.static_unexplained = static_unexplained, r.composite_unexplained = composite_unexplained;
   const float per_pixel = r.pixels ? 1.0f / float(r.pixels) : 0.0f;
   const float explained_weight = penalties.lambda_explained * per_pixel;
   const float owned_weight = penalize ? penalties.lambda_owned * per_pixel : 0.0f;
