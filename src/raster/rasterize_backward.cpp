@@ -83,7 +83,7 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
     using EntryRecord = Eigen::Array<float, kEntrySlots, 1>;
     EntryRecord sum = EntryRecord::Zero();
     for (int32_t e = fw.gaussian_offsets[i]; e < fw.gaussian_offsets[i + 1]; ++e)
-      sum += Eigen::Map<const EntryRecord>(entry_grads + size_t(fw.entry_of_gaussian[e]) * kEntrySlots);
+      sum += Eigen::Map<const EntryRecord>(entry_grads + size_t(e) * kEntrySlots);
     grads.means2d[2 * i] = sum[kMx];
     grads.means2d[2 * i + 1] = sum[kMy];
     grads.absgrad[i] = std::hypot(sum[kAbsX], sum[kAbsY]);

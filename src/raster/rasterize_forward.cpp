@@ -148,7 +148,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     for (int t = 0; t < tiles; ++t) out.tile_offsets[t + 1] += chunk_counts[size_t(ch) * tiles + t];
   std::partial_sum(out.tile_offsets.begin(), out.tile_offsets.end(), out.tile_offsets.begin());
   out.tile_entries.resize(entries);
-  out.entry_of_gaussian.resize(entries);
+  out.record_of_entry.resize(entries);
 
   // Bands of tile rows with about equal numbers of entries.
   const int bands = std::min(threads, grid.tiles_y);
@@ -171,8 +171,8 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
         for (int tx = r.x0; tx < r.x1; ++tx) {
           const int32_t pos = cursor[(ty - y_lo) * grid.tiles_x + tx]++;
           out.tile_entries[pos] = i;
-          // Entries of a Gaussian are numbered in row-major order over its rectangle.
-          out.entry_of_gaussian[out.gaussian_offsets[i] + (ty - r.y0) * (r.x1 - r.x0) + (tx - r.x0)] = pos;
+          // A Gaussian's records follow row-major order over its rectangle.
+          out.record_of_entry[pos] = out.gaussian_offsets[i] + (ty - r.y0) * (r.x1 - r.x0) + (tx - r.x0);
         }
     }
   }

@@ -17,7 +17,8 @@ struct TileKernels {
   // Front-to-back blending of one tile of `out` (binned by rasterize_blend); writes the
   // tile's pixels and returns the Gaussian–pixel pairs evaluated.
   int64_t (*blend_tile)(const TileGrid& grid, int tile, RasterOutput& out);
-  // Back-to-front walk of one tile: one kEntrySlots record per tile entry in entry_grads.
+  // Back-to-front walk of one tile: one kEntrySlots record per tile entry in entry_grads, at
+  // the entry's record_of_entry (grouped by Gaussian, so each Gaussian's sum reads them in a run).
   // dC [H,W,3], dA and dD [H,W] may be null (zero).
   void (*backward_tile)(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
                         const float* dA, const float* dD, float* entry_grads);

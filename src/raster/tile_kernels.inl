@@ -36,6 +36,17 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, out.width - x0), rows = std::min(S, out.height - y0);
+  if (out.tile_offsets[tile] == out.tile_offsets[tile + 1]) {  // no Gaussian: the empty render
+    for (int r = 0; r < rows; ++r) {
+      const int64_t p0 = int64_t(y0 + r) * out.width + x0;
+      std::fill_n(&out.color[3 * p0], 3 * cols, 0.0f);
+      std::fill_n(&out.alpha[p0], cols, 0.0f);
+      std::fill_n(&out.depth[p0], cols, 0.0f);
+      std::fill_n(&out.final_transmittance[p0], cols, 1.0f);
+      std::fill_n(&out.last_contributor[p0], cols, -1);
+    }
+    return 0;
+  }
   alignas(64) float T[S * S], Cr[S * S], Cg[S * S], Cb[S * S], D[S * S];
   alignas(64) int32_t active[S * S], last[S * S];
   alignas(64) float px_center[S];
@@ -124,6 +135,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
+  if (fw.tile_offsets[tile] == fw.tile_offsets[tile + 1]) return;  // no entries, no records
   // Per pixel: current transmittance (after the Gaussian being visited), the incoming
   // gradients, the last blended index, and Q = T_final·∂L/∂A − Σ_behind w·(c·∂L/∂C + z·∂L/∂D),
   // the part of ∂L/∂α that the Gaussians behind contribute (times 1/(1 − α), see below).
@@ -154,7 +166,8 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
 
   const int begin = fw.tile_offsets[tile], end = fw.tile_offsets[tile + 1];
   // Entries after the last blended one in every pixel get zero gradient.
-  std::fill(entry_grads + size_t(begin + max_last + 1) * kEntrySlots, entry_grads + size_t(end) * kEntrySlots, 0.0f);
+  for (int e = begin + max_last + 1; e < end; ++e)
+    std::fill_n(entry_grads + size_t(fw.record_of_entry[e]) * kEntrySlots, kEntrySlots, 0.0f);
   for (int k = max_last; k >= 0; --k) {
     const int32_t g = fw.tile_entries[begin + k];
     const float mx = fw.means2d[2 * g], my = fw.means2d[2 * g + 1];
@@ -217,7 +230,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
       });
     }
     // Columns of halves not visited hold +0, and adding +0 changes no sum: they are left out.
-    float* record = entry_grads + size_t(begin + k) * kEntrySlots;
+    float* record = entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots;
     for (int q = 0; q < kEntrySlots; ++q) {
       record[q] = 0;
       for (int col = h0 * kHalfTile; col < (h1 + 1) * kHalfTile; ++col) record[q] += acc[q][col];

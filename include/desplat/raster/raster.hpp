@@ -100,8 +100,9 @@ struct RasterOutput {
                                           // (src/raster/tiles.hpp, chord_shape)
   std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
   std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
-  std::vector<int32_t> gaussian_offsets;  // [N + 1] CSR offsets into entry_of_gaussian
-  std::vector<int32_t> entry_of_gaussian; // [E] each Gaussian's entries, in tile order
+  std::vector<int32_t> gaussian_offsets;  // [N + 1] each Gaussian's first gradient record
+  std::vector<int32_t> record_of_entry;   // [E] per tile entry, its gradient record: records
+                                          // are grouped by Gaussian, each group in tile order
   std::vector<float> final_transmittance; // [H, W]
   std::vector<int32_t> last_contributor;  // [H, W] index within the tile list, −1: none
   // The pixel-loop path rasterize_blend ran (resolved, never Auto); the backward runs the
