@@ -3,6 +3,8 @@
 // kernel itself.
 #include <gtest/gtest.h>
 
+#include <bit>
+
 #include "support/jet_gradient.hpp"
 #include "support/scenes.hpp"
 
@@ -61,6 +63,25 @@ struct Case {
   float logit_max;  // high values exercise the 0.999 α clamp and early termination
 };
 
+GaussianSet case_gaussians(const Case& c, std::mt19937& rng) {
+  SceneSpec spec;
+  spec.count = c.count;
+  spec.mode = c.mode;
+  spec.sh_degree = c.sh_degree;
+  spec.spread = 1.0f;
+  spec.log_scale_min = -2.0f;
+  spec.logit_max = c.logit_max;
+  spec.sh_sigma = 0.5f;  // some colors fall below zero: the clamp is exercised
+  return random_gaussians(rng, spec);
+}
+
+RasterSettings case_settings(const Case& c, KernelIsa isa) {
+  RasterSettings s;
+  s.active_sh_degree = c.active_degree;
+  s.isa = isa;
+  return s;
+}
+
 // Every case runs once per pixel-loop path (raster.hpp, KernelIsa); a path this CPU cannot
 // run is skipped, and says so.
 class BackwardVsJet : public ::testing::TestWithParam<std::tuple<Case, KernelIsa>> {};
@@ -71,18 +92,8 @@ TEST_P(BackwardVsJet, MatchesAutodiffReference) {
   for (int seed = 0; seed < 3; ++seed) {
     std::mt19937 rng(77 + seed * 13 + c.count);
     const Camera cam = random_camera(rng, c.width, c.height, c.focal);
-    SceneSpec spec;
-    spec.count = c.count;
-    spec.mode = c.mode;
-    spec.sh_degree = c.sh_degree;
-    spec.spread = 1.0f;
-    spec.log_scale_min = -2.0f;
-    spec.logit_max = c.logit_max;
-    spec.sh_sigma = 0.5f;  // some colors fall below zero: the clamp is exercised
-    const GaussianSet g = random_gaussians(rng, spec);
-    RasterSettings s;
-    s.active_sh_degree = c.active_degree;
-    s.isa = isa;
+    const GaussianSet g = case_gaussians(c, rng);
+    const RasterSettings s = case_settings(c, isa);
     const Loss loss = random_loss(rng, cam);
     RasterOutput out;
     rasterize_forward(g.view(), cam, s, out);
@@ -91,6 +102,32 @@ TEST_P(BackwardVsJet, MatchesAutodiffReference) {
     const std::vector<double> want = jet_gradient(g, cam, s, loss.wC, loss.wA, loss.wD);
     expect_gradients_match(g, grads, want, 2e-4, "seed " + std::to_string(seed));
   }
+}
+
+// Training passes no depth gradient, and the pixel loop then leaves the depth term out
+// (tile_kernels.inl, kWithDepth). That path against the Jets with a zero depth weight, and
+// bit for bit against the loop given an all-zero depth gradient.
+TEST_P(BackwardVsJet, WithoutDepthGradientMatchesAutodiffAndTheZeroDepthGradient) {
+  const auto [c, isa] = GetParam();
+  if (!cpu_supports(isa)) GTEST_SKIP() << kernel_isa_name(isa) << " is not supported by this CPU";
+  std::mt19937 rng(91 + c.count);
+  const Camera cam = random_camera(rng, c.width, c.height, c.focal);
+  const GaussianSet g = case_gaussians(c, rng);
+  const RasterSettings s = case_settings(c, isa);
+  const Loss loss = random_loss(rng, cam);
+  const std::vector<float> zero_depth(loss.wD.size(), 0.0f);
+  RasterOutput out;
+  rasterize_forward(g.view(), cam, s, out);
+  RasterGradients without, with_zeros;
+  rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, {}, without);
+  rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, zero_depth, with_zeros);
+  const std::vector<double> want = jet_gradient(g, cam, s, loss.wC, loss.wA, zero_depth);
+  expect_gradients_match(g, without, want, 2e-4, "no depth gradient");
+  const std::vector<float> a = flatten_grads(without), b = flatten_grads(with_zeros);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i)
+    ASSERT_EQ(std::bit_cast<uint32_t>(a[i]), std::bit_cast<uint32_t>(b[i])) << "element " << i;
+  EXPECT_EQ(without.absgrad, with_zeros.absgrad);
 }
 
 INSTANTIATE_TEST_SUITE_P(

@@ -98,6 +98,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
                      out.blend_radii[2 * i + 1]);
   };
   out.gaussian_offsets.assign(n + 1, 0);
+  out.splats.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
     // Visible: the 3.33σ box touches a tile (it may still be listed in none, when its
@@ -105,7 +106,15 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     if (out.visible[i] &&
         tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i], out.radii[2 * i + 1]).area() == 0)
       out.visible[i] = 0;
-    out.gaussian_offsets[i + 1] = out.visible[i] ? rect_of(i).area() : 0;
+    const int listed = out.visible[i] ? rect_of(i).area() : 0;
+    out.gaussian_offsets[i + 1] = listed;
+    if (listed == 0) continue;
+    TileSplat& sp = out.splats[i];
+    sp.mx = out.means2d[2 * i], sp.my = out.means2d[2 * i + 1];
+    for (int k = 0; k < 3; ++k) sp.conic[k] = out.conics[3 * i + k], sp.rgb[k] = out.rgb[3 * i + k];
+    sp.opacity = out.opacity[i], sp.depth = out.depths[i];
+    for (int k = 0; k < kChordFloats; ++k) sp.chord[k] = out.chords[kChordFloats * i + k];
+    sp.rx = out.blend_radii[2 * i], sp.ry = out.blend_radii[2 * i + 1];
   }
   // Depth is > near > 0, so its float bits order like the value: (bits << 32 | id)
   // sorts by depth, then id, with plain integer compares. The keys are unique, so sorting

@@ -10,12 +10,63 @@
 #include <cmath>
 #include <type_traits>
 
+#if DESPLAT_TILE_FULL_ROWS
+#include <immintrin.h>
+#endif
+
 #include "raster/fast_exp.hpp"
 #include "raster/stage_math.hpp"
 #include "raster/tile_kernels.hpp"
 
 namespace desplat::raster::DESPLAT_TILE_NS {
 namespace {
+
+// How many tile entries ahead the pixel loops prefetch a Gaussian's TileSplat.
+constexpr int kSplatPrefetch = 2;
+
+// record[q] = Σ acc[q][col] over columns [c0, c1), each slot summed column after column from
+// +0: the order (and so the bits) of a plain scalar loop.
+[[gnu::always_inline]] inline void sum_columns(const float (&acc)[kEntrySlots][kTileSize], int c0, int c1,
+                                               float* record) {
+#if DESPLAT_TILE_FULL_ROWS
+  // One AVX-512 vector per slot row, transposed in registers to one vector per column (lane q
+  // = slot q), so the 12 running sums advance together: one vector add per column instead
+  // of 12 dependent scalar chains.
+  static_assert(kTileSize == 16 && kEntrySlots <= 16);
+  __m512 r[16];
+  for (int q = 0; q < 16; ++q) r[q] = q < kEntrySlots ? _mm512_load_ps(acc[q]) : _mm512_setzero_ps();
+  __m512 a[16], b[16];
+  for (int i = 0; i < 8; ++i) {  // 32-bit interleave of row pairs, within 128-bit lanes
+    a[2 * i] = _mm512_unpacklo_ps(r[2 * i], r[2 * i + 1]);
+    a[2 * i + 1] = _mm512_unpackhi_ps(r[2 * i], r[2 * i + 1]);
+  }
+  for (int i = 0; i < 4; ++i) {  // 64-bit interleave: lane k of b[4i + j] = column 4k + j, rows 4i..4i+3
+    auto lo = [](__m512 x, __m512 y) { return _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(x), _mm512_castps_pd(y))); };
+    auto hi = [](__m512 x, __m512 y) { return _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(x), _mm512_castps_pd(y))); };
+    b[4 * i + 0] = lo(a[4 * i], a[4 * i + 2]);
+    b[4 * i + 1] = hi(a[4 * i], a[4 * i + 2]);
+    b[4 * i + 2] = lo(a[4 * i + 1], a[4 * i + 3]);
+    b[4 * i + 3] = hi(a[4 * i + 1], a[4 * i + 3]);
+  }
+  __m512 column[16];
+  for (int j = 0; j < 4; ++j) {  // gather lane k of the four row groups: column 4k + j
+    const __m512 c0 = _mm512_shuffle_f32x4(b[j], b[4 + j], 0x88), c1 = _mm512_shuffle_f32x4(b[j], b[4 + j], 0xDD);
+    const __m512 c2 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0x88), c3 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0xDD);
+    column[j] = _mm512_shuffle_f32x4(c0, c2, 0x88);
+    column[8 + j] = _mm512_shuffle_f32x4(c0, c2, 0xDD);
+    column[4 + j] = _mm512_shuffle_f32x4(c1, c3, 0x88);
+    column[12 + j] = _mm512_shuffle_f32x4(c1, c3, 0xDD);
+  }
+  __m512 sum = _mm512_setzero_ps();
+  for (int col = c0; col < c1; ++col) sum = _mm512_add_ps(sum, column[col]);
+  _mm512_mask_storeu_ps(record, __mmask16((1u << kEntrySlots) - 1), sum);
+#else
+  for (int q = 0; q < kEntrySlots; ++q) {
+    record[q] = 0;
+    for (int col = c0; col < c1; ++col) record[q] += acc[q][col];
+  }
+#endif
+}
 
 // The pixel loops run over column spans with a compile-time width, so each becomes
 // whole vectors: an 8-column half (one AVX2 vector), or with DESPLAT_TILE_FULL_ROWS a
@@ -64,15 +115,19 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
   const int begin = out.tile_offsets[tile], end = out.tile_offsets[tile + 1];
   for (int k = 0; k < end - begin && remaining > 0; ++k) {
     const int32_t g = out.tile_entries[begin + k];
-    const float mx = out.means2d[2 * g], my = out.means2d[2 * g + 1];
-    const float a = out.conics[3 * g], b = out.conics[3 * g + 1], c = out.conics[3 * g + 2];
-    const float o = out.opacity[g], z = out.depths[g];
-    const float cr = out.rgb[3 * g], cg = out.rgb[3 * g + 1], cb = out.rgb[3 * g + 2];
+    // A tile's Gaussians are in depth order, so their splats are scattered in memory: ask
+    // for the one kSplatPrefetch entries ahead while this one is blended.
+    if (k + kSplatPrefetch < end - begin) __builtin_prefetch(&out.splats[out.tile_entries[begin + k + kSplatPrefetch]]);
+    const TileSplat& sp = out.splats[g];
+    const float mx = sp.mx, my = sp.my;
+    const float a = sp.conic[0], b = sp.conic[1], c = sp.conic[2];
+    const float o = sp.opacity, z = sp.depth;
+    const float cr = sp.rgb[0], cg = sp.rgb[1], cb = sp.rgb[2];
     int r0, r1, h0, h1;
-    box_rows_in_tile(my, out.blend_radii[2 * g + 1], y0, rows, r0, r1);
-    box_halves_in_tile(mx, out.blend_radii[2 * g], x0, cols, h0, h1);
+    box_rows_in_tile(my, sp.ry, y0, rows, r0, r1);
+    box_halves_in_tile(mx, sp.rx, x0, cols, h0, h1);
     if (h0 > h1) continue;
-    const RowChords chords(&out.chords[kChordFloats * g], mx, x0, h0, h1);
+    const RowChords chords(sp.chord, mx, x0, h0, h1);
     // Pixels that stopped at this entry, per column; summed once per entry rather than per row.
     alignas(64) int32_t finished[S] = {};
     alignas(64) int32_t row_h0[S], row_h1[S];
@@ -113,25 +168,31 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     for (int col = 0; col < S; ++col) remaining -= finished[col];
   }
 
-  for (int r = 0; r < rows; ++r)
+  for (int r = 0; r < rows; ++r) {
+    const int64_t p0 = int64_t(y0 + r) * out.width + x0;
+    const int row = r * S;
+    float* color = &out.color[3 * p0];
+#pragma omp simd
+    for (int col = 0; col < cols; ++col)
+      color[3 * col] = Cr[row + col], color[3 * col + 1] = Cg[row + col], color[3 * col + 2] = Cb[row + col];
+#pragma omp simd
     for (int col = 0; col < cols; ++col) {
-      const int j = r * S + col;
-      const int64_t p = int64_t(y0 + r) * out.width + (x0 + col);
-      out.color[3 * p] = Cr[j];
-      out.color[3 * p + 1] = Cg[j];
-      out.color[3 * p + 2] = Cb[j];
-      out.alpha[p] = 1.0f - T[j];
-      out.depth[p] = D[j];
-      out.final_transmittance[p] = T[j];
-      out.last_contributor[p] = last[j];
+      out.alpha[p0 + col] = 1.0f - T[row + col];
+      out.depth[p0 + col] = D[row + col];
+      out.final_transmittance[p0 + col] = T[row + col];
+      out.last_contributor[p0 + col] = last[row + col];
     }
+  }
   return evaluated;
 }
 
 // Back-to-front walk of one tile: per (tile, Gaussian) entry, the gradient with respect to
-// the Gaussian's 2D quantities from this tile's pixels (docs/METHOD.md §3).
-void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                   const float* dA, const float* dD, float* entry_grads) {
+// the Gaussian's 2D quantities from this tile's pixels (docs/METHOD.md §3). Training passes
+// no depth gradient; without one (kWithDepth false) the depth term and its per-column sum are
+// left out of the pixel loop instead of adding zeros (the kZ slot stays +0, as the zeros gave).
+template <bool kWithDepth>
+void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
+                        const float* dA, const float* dD, float* entry_grads) {
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
@@ -144,25 +205,39 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
   alignas(64) int32_t last[S * S];
   alignas(64) float px_center[S];
   for (int i = 0; i < S; ++i) px_center[i] = x0 + i + 0.5f;
+  // Pixels outside the image (a partial tile) keep these: nothing blended, no gradient.
+  if (rows < S || cols < S)
+    for (int j = 0; j < S * S; ++j) T[j] = 1, last[j] = -1, gr[j] = gg[j] = gb[j] = gd[j] = Q[j] = 0;
+  // Row by row, one loop per input, so each is a plain (vectorizable) copy.
   int max_last = -1;
-  for (int r = 0; r < S; ++r)
-    for (int col = 0; col < S; ++col) {
-      const int j = r * S + col;
-      if (r < rows && col < cols) {
-        const int64_t p = int64_t(y0 + r) * fw.width + (x0 + col);
-        T[j] = fw.final_transmittance[p];
-        last[j] = fw.last_contributor[p];
-        gr[j] = dC ? dC[3 * p] : 0.0f;
-        gg[j] = dC ? dC[3 * p + 1] : 0.0f;
-        gb[j] = dC ? dC[3 * p + 2] : 0.0f;
-        gd[j] = dD ? dD[p] : 0.0f;
-        Q[j] = dA ? T[j] * dA[p] : 0.0f;
-      } else {
-        T[j] = 1, last[j] = -1;
-        gr[j] = gg[j] = gb[j] = gd[j] = Q[j] = 0;
-      }
-      max_last = std::max(max_last, last[j]);
+  for (int r = 0; r < rows; ++r) {
+    const int64_t p0 = int64_t(y0 + r) * fw.width + x0;
+    float *t = &T[r * S], *q = &Q[r * S], *cr = &gr[r * S], *cg = &gg[r * S], *cb = &gb[r * S], *cd = &gd[r * S];
+    int32_t* l = &last[r * S];
+#pragma omp simd reduction(max : max_last)
+    for (int col = 0; col < cols; ++col) {
+      t[col] = fw.final_transmittance[p0 + col];
+      l[col] = fw.last_contributor[p0 + col];
+      max_last = std::max(max_last, l[col]);
     }
+    if (dC) {
+#pragma omp simd
+      for (int col = 0; col < cols; ++col)
+        cr[col] = dC[3 * (p0 + col)], cg[col] = dC[3 * (p0 + col) + 1], cb[col] = dC[3 * (p0 + col) + 2];
+    } else {
+      std::fill_n(cr, cols, 0.0f), std::fill_n(cg, cols, 0.0f), std::fill_n(cb, cols, 0.0f);
+    }
+    if (dD)
+      std::copy_n(&dD[p0], cols, cd);
+    else
+      std::fill_n(cd, cols, 0.0f);
+    if (dA) {
+#pragma omp simd
+      for (int col = 0; col < cols; ++col) q[col] = t[col] * dA[p0 + col];
+    } else {
+      std::fill_n(q, cols, 0.0f);
+    }
+  }
 
   const int begin = fw.tile_offsets[tile], end = fw.tile_offsets[tile + 1];
   // Entries after the last blended one in every pixel get zero gradient.
@@ -170,17 +245,19 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
     std::fill_n(entry_grads + size_t(fw.record_of_entry[e]) * kEntrySlots, kEntrySlots, 0.0f);
   for (int k = max_last; k >= 0; --k) {
     const int32_t g = fw.tile_entries[begin + k];
-    const float mx = fw.means2d[2 * g], my = fw.means2d[2 * g + 1];
-    const float a = fw.conics[3 * g], b = fw.conics[3 * g + 1], c = fw.conics[3 * g + 2];
-    const float o = fw.opacity[g], z = fw.depths[g];
-    const float cr = fw.rgb[3 * g], cg = fw.rgb[3 * g + 1], cb = fw.rgb[3 * g + 2];
+    if (k >= kSplatPrefetch) __builtin_prefetch(&fw.splats[fw.tile_entries[begin + k - kSplatPrefetch]]);
+    const TileSplat& sp = fw.splats[g];
+    const float mx = sp.mx, my = sp.my;
+    const float a = sp.conic[0], b = sp.conic[1], c = sp.conic[2];
+    const float o = sp.opacity, z = sp.depth;
+    const float cr = sp.rgb[0], cg = sp.rgb[1], cb = sp.rgb[2];
     // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
     // and the lanes are summed in a fixed order afterwards (deterministic).
     alignas(64) float acc[kEntrySlots][S] = {};
     int r0, r1, h0, h1;
-    box_rows_in_tile(my, fw.blend_radii[2 * g + 1], y0, rows, r0, r1);
-    box_halves_in_tile(mx, fw.blend_radii[2 * g], x0, cols, h0, h1);
-    const RowChords chords(&fw.chords[kChordFloats * g], mx, x0, h0, h1);
+    box_rows_in_tile(my, sp.ry, y0, rows, r0, r1);
+    box_halves_in_tile(mx, sp.rx, x0, cols, h0, h1);
+    const RowChords chords(sp.chord, mx, x0, h0, h1);
     alignas(64) int32_t row_h0[S], row_h1[S];
     chords.row_halves(my, y0, row_h0, row_h1);
     for (int r = r0; r <= r1; ++r) {
@@ -206,7 +283,8 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
           const float w = hit * alpha * t_before;
           // ∂C/∂α = c·T − (blended behind)/(1 − α) per channel, ∂A/∂α = T_final/(1 − α):
           // ∂L/∂α = T·(c·∂L/∂C + z·∂L/∂D) + Q/(1 − α).
-          const float dot = cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j];
+          const float dot = kWithDepth ? cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j]
+                                       : cr * gr[j] + cg * gg[j] + cb * gb[j];
           const float d_alpha = t_before * dot + ra * Q[j];
           const float unclamped = o * vis <= kAlphaMax ? hit : 0.0f;
           const float d_sigma = -unclamped * d_alpha * o * vis;
@@ -215,7 +293,7 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
           acc[kR][col] += w * gr[j];
           acc[kG][col] += w * gg[j];
           acc[kB][col] += w * gb[j];
-          acc[kZ][col] += w * gd[j];
+          if constexpr (kWithDepth) acc[kZ][col] += w * gd[j];
           acc[kO][col] += unclamped * d_alpha * vis;
           acc[kA][col] += 0.5f * d_sigma * dx * dx;
           acc[kB2][col] += d_sigma * dx * dy;
@@ -230,12 +308,17 @@ void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const
       });
     }
     // Columns of halves not visited hold +0, and adding +0 changes no sum: they are left out.
-    float* record = entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots;
-    for (int q = 0; q < kEntrySlots; ++q) {
-      record[q] = 0;
-      for (int col = h0 * kHalfTile; col < (h1 + 1) * kHalfTile; ++col) record[q] += acc[q][col];
-    }
+    sum_columns(acc, h0 * kHalfTile, (h1 + 1) * kHalfTile,
+                entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots);
   }
+}
+
+void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
+                   const float* dA, const float* dD, float* entry_grads) {
+  if (dD)
+    backward_tile_walk<true>(grid, tile, fw, dC, dA, dD, entry_grads);
+  else
+    backward_tile_walk<false>(grid, tile, fw, dC, dA, dD, entry_grads);
 }
 
 }  // namespace

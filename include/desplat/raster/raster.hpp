@@ -70,6 +70,20 @@ struct RasterSettings {
 
 constexpr int kTileSize = 16;
 
+// What the pixel loops read of one Gaussian, packed into one 64-byte cache line: a tile entry
+// then costs one line of a Gaussian visited in depth order (random ids) instead of one per
+// per-Gaussian array. Copies of RasterOutput's arrays, made by rasterize_blend after the
+// colours are final (a caller may change rgb between rasterize_project and rasterize_blend).
+struct alignas(64) TileSplat {
+  float mx, my;          // means2d
+  float conic[3];        // conics
+  float opacity, depth;  // opacity, depths
+  float rgb[3];          // rgb
+  float chord[4];        // chords
+  int32_t rx, ry;        // blend_radii
+};
+static_assert(sizeof(TileSplat) == 64);
+
 // Everything the forward pass produces. The per-pixel and per-Gaussian results are
 // the public outputs; the members under "saved for backward" are the state the
 // backward pass needs and should be treated as opaque.
@@ -98,6 +112,8 @@ struct RasterOutput {
                                           // (≤ radii; opacity-dependent): tiles and rows visited
   std::vector<float> chords;              // [N, 4] the ellipse's row chords within that box
                                           // (src/raster/tiles.hpp, chord_shape)
+  std::vector<TileSplat> splats;          // [N] the above, packed for the pixel loops (set
+                                          // for the Gaussians listed in a tile only)
   std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
   std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
   std::vector<int32_t> gaussian_offsets;  // [N + 1] each Gaussian's first gradient record
