@@ -43,7 +43,7 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     out.visible[i] = 0;
     out.means2d[2 * i] = out.means2d[2 * i + 1] = 0.0f;
     for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = out.rgb[3 * i + k] = 0.0f, out.color_clamped[3 * i + k] = 0;
-    for (int k = 0; k < kChordFloats; ++k) out.chords[kChordFloats * i + k] = 0.0f;
+    for (int k = 0; k < kChordFloats; ++k) out.splats[i].chord[k] = 0.0f;
     out.depths[i] = out.opacity[i] = 0.0f;
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     const Vec3<float> p = W * mean + t;
@@ -77,7 +77,7 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     out.blend_radii[2 * i] = static_cast<int32_t>(std::min(rx, std::ceil(k * std::sqrt(proj.cov2d(0, 0)))));
     out.blend_radii[2 * i + 1] = static_cast<int32_t>(std::min(ry, std::ceil(k * std::sqrt(proj.cov2d(1, 1)))));
     chord_shape(conic[0], conic[1], conic[2], opacity, out.blend_radii[2 * i], out.blend_radii[2 * i + 1],
-                &out.chords[kChordFloats * i]);
+                out.splats[i].chord);
     out.depths[i] = p[2];
     out.opacity[i] = opacity;
     for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
@@ -98,7 +98,6 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
                      out.blend_radii[2 * i + 1]);
   };
   out.gaussian_offsets.assign(n + 1, 0);
-  out.splats.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
     // Visible: the 3.33σ box touches a tile (it may still be listed in none, when its
@@ -113,7 +112,6 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     sp.mx = out.means2d[2 * i], sp.my = out.means2d[2 * i + 1];
     for (int k = 0; k < 3; ++k) sp.conic[k] = out.conics[3 * i + k], sp.rgb[k] = out.rgb[3 * i + k];
     sp.opacity = out.opacity[i], sp.depth = out.depths[i];
-    for (int k = 0; k < kChordFloats; ++k) sp.chord[k] = out.chords[kChordFloats * i + k];
     sp.rx = out.blend_radii[2 * i], sp.ry = out.blend_radii[2 * i + 1];
   }
   // Depth is > near > 0, so its float bits order like the value: (bits << 32 | id)
@@ -206,7 +204,7 @@ void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSet
   out.opacity.resize(n);
   out.color_clamped.resize(3 * n);
   out.blend_radii.resize(2 * n);
-  out.chords.resize(kChordFloats * n);
+  out.splats.resize(n);  // the chord shape now, the rest when the tiles are binned
   preprocess(g, cam, s, sh_degree, out);
 }
 

@@ -60,7 +60,7 @@ inline void box_halves_in_tile(float mx, int rx, int x0, int cols, int& h0, int&
 // blend (tests/test_stage_math.cpp checks it against the loops' own float σ). The shape is
 // built once per Gaussian (chord_shape, in double, with s widened by a bound on the loops'
 // float error in σ: a few units of roundoff of its largest term within the box) and stored
-// with the projection (RasterOutput::chords); each tile entry then places it (RowChords) and
+// with the projection (TileSplat::chord); each tile entry then places it (RowChords) and
 // its rows cost one vector pass of float square roots (row_halves). Rows of a box within
 // one half gain only when the chord misses them whole.
 constexpr int kChordFloats = 4;  // slope, curvature, reach, pad; reach NaN: no chord

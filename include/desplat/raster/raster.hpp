@@ -72,14 +72,16 @@ constexpr int kTileSize = 16;
 
 // What the pixel loops read of one Gaussian, packed into one 64-byte cache line: a tile entry
 // then costs one line of a Gaussian visited in depth order (random ids) instead of one per
-// per-Gaussian array. Copies of RasterOutput's arrays, made by rasterize_blend after the
-// colours are final (a caller may change rgb between rasterize_project and rasterize_blend).
+// per-Gaussian array. The chord shape is written by rasterize_project; the other fields are
+// copies of RasterOutput's arrays, made by rasterize_blend after the colours are final (a
+// caller may change rgb between rasterize_project and rasterize_blend).
 struct alignas(64) TileSplat {
   float mx, my;          // means2d
   float conic[3];        // conics
   float opacity, depth;  // opacity, depths
   float rgb[3];          // rgb
-  float chord[4];        // chords
+  float chord[4];        // the ellipse's row chords within the blend box (src/raster/tiles.hpp,
+                         // chord_shape); zero for an invisible Gaussian
   int32_t rx, ry;        // blend_radii
 };
 static_assert(sizeof(TileSplat) == 64);
@@ -110,10 +112,9 @@ struct RasterOutput {
   std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
   std::vector<int32_t> blend_radii;       // [N, 2] the extent [px] in which α can reach 1/255
                                           // (≤ radii; opacity-dependent): tiles and rows visited
-  std::vector<float> chords;              // [N, 4] the ellipse's row chords within that box
-                                          // (src/raster/tiles.hpp, chord_shape)
-  std::vector<TileSplat> splats;          // [N] the above, packed for the pixel loops (set
-                                          // for the Gaussians listed in a tile only)
+  std::vector<TileSplat> splats;          // [N] the above and the row chords, packed for the
+                                          // pixel loops (complete for the Gaussians listed in
+                                          // a tile only)
   std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
   std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
   std::vector<int32_t> gaussian_offsets;  // [N + 1] each Gaussian's first gradient record
