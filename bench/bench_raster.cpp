@@ -6,8 +6,9 @@
 //     training (docs/METHOD.md §5), seen from its first camera at 540×960;
 //   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
 //     the same camera: the workload of a late training step.
-// Counters: pairs = Gaussian–pixel pairs whose α was evaluated per call;
-// time_per_pair = wall time per evaluated pair. Each runs once per pixel-loop path
+// Counters: pairs = Gaussian–pixel pairs per call in the row halves the chords reach
+// (RasterOutput::evaluated_pairs, the same count on every path);
+// time_per_pair = wall time per such pair. Each runs once per pixel-loop path
 // (isa: 1 portable, 2 AVX2, 3 AVX-512; raster.hpp, KernelIsa), skipped where the CPU lacks it.
 #include <benchmark/benchmark.h>
 
