@@ -75,7 +75,7 @@ constexpr int kSplatPrefetch = 2;
 // 16-lane pass costs what an 8-lane one does, and choosing between them per row was a
 // branch that followed the chord's shape; with one kind of pass per row the compiler also
 // keeps the backward's column sums in registers over the rows (measured: forward + backward
-// 1.07× faster). Same bits: a pixel outside the chord has α < 1/255 (tiles.hpp), so the
+// 1.09–1.10× faster, docs/bench/issue16_speed.md). Same bits: a pixel outside the chord has α < 1/255 (tiles.hpp), so the
 // extra lanes blend nothing and add nothing.
 template <typename Span>
 [[gnu::always_inline]] inline void for_each_span(int h0, int h1, Span&& span) {

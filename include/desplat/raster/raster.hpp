@@ -103,7 +103,7 @@ struct RasterOutput {
   std::vector<float> depths;     // [N]    camera-space z
   std::vector<uint8_t> visible;  // [N]    1 if the Gaussian touches at least one tile
   // Work done, for benchmarks: Gaussian–pixel pairs in the 8-column halves of each tile row
-  // that a Gaussian's chord reaches (docs/METHOD.md §2), the pairs the AVX2 path evaluates.
+  // that a Gaussian's chord reaches (docs/METHOD.md §3), the pairs the AVX2 path evaluates.
   // The AVX-512 path evaluates each such row whole (16 lanes cost what 8 do there); the
   // count is the same on every path, so ns per pair compares builds and paths.
   int64_t evaluated_pairs = 0;
