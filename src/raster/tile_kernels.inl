@@ -315,7 +315,8 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
         }
       });
     }
-    // Columns of halves not visited hold +0, and adding +0 changes no sum: they are left out.
+    // Columns outside the box's halves hold +0 (not visited, or on AVX-512 visited by lanes
+    // that add only ±0 to +0), and adding +0 changes no sum: they are left out.
     sum_columns(acc, h0 * kHalfTile, (h1 + 1) * kHalfTile,
                 entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots);
   }
