@@ -5,7 +5,10 @@
 //   * fox: the 12,421-point COLMAP model of ../shared/data/fox initialized as in
 //     training (docs/METHOD.md §5), seen from its first camera at 540×960;
 //   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
-//     the same camera: the workload of a late training step.
+//     the same camera: the workload of a late training step;
+//   * trained fox at 135×240 (the same camera at ¼ size): few pixels per Gaussian, so the
+//     per-Gaussian stages (projection, binning, sorting, the backward's per-Gaussian
+//     half) weigh as in the low-resolution steps of a training run.
 // Counters: pairs = Gaussian–pixel pairs per call in the row halves the chords reach
 // (RasterOutput::evaluated_pairs, the same count on every path);
 // time_per_pair = wall time per such pair. Each runs once per pixel-loop path
@@ -122,6 +125,15 @@ Scene trained_fox_scene() {
   return s;
 }
 
+// `s` seen by the same camera at 1/factor of its size (intrinsics scaled with the image).
+Scene shrunk(Scene s, int factor) {
+  Camera& c = s.camera;
+  c.width /= factor;
+  c.height /= factor;
+  c.fx /= float(factor), c.fy /= float(factor), c.cx /= float(factor), c.cy /= float(factor);
+  return s;
+}
+
 const Scene& scene_for(int64_t id) {
   static const Scene s100k = frustum_scene(100000);
   static const Scene s500k = frustum_scene(500000);
@@ -131,6 +143,10 @@ const Scene& scene_for(int64_t id) {
     static const Scene trained = trained_fox_scene();
     return trained;
   }
+  if (id == 4) {
+    static const Scene trained_small = shrunk(trained_fox_scene(), 4);
+    return trained_small;
+  }
   static const Scene fox = fox_scene();
   return fox;
 }
@@ -138,7 +154,7 @@ const Scene& scene_for(int64_t id) {
 void run(benchmark::State& state, bool backward) {
   const Scene& scene = scene_for(state.range(0));
   if (scene.gaussians.size() == 0) {
-    state.SkipWithError("set DESPLAT_BENCH_PLY to a trained fox point_cloud.ply for scene 1");
+    state.SkipWithError("set DESPLAT_BENCH_PLY to a trained fox point_cloud.ply for scenes 1 and 4");
     return;
   }
   RasterSettings settings;
@@ -172,9 +188,10 @@ void BM_Forward(benchmark::State& state) { run(state, false); }
 void BM_ForwardBackward(benchmark::State& state) { run(state, true); }
 
 // range(0): 100000 / 500000 random Gaussians, 0 = fox at initialization, 1 = a trained
-// fox (DESPLAT_BENCH_PLY); range(1): threads; range(2): the KernelIsa path.
+// fox (DESPLAT_BENCH_PLY), 4 = the trained fox at ¼ size; range(1): threads; range(2): the
+// KernelIsa path.
 void args(benchmark::internal::Benchmark* b) {
-  for (int64_t scene : {100000, 500000, 0, 1})
+  for (int64_t scene : {100000, 500000, 0, 1, 4})
     for (int64_t threads : {1, 2})
       for (KernelIsa isa : {KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512})
         b->Args({scene, threads, static_cast<int64_t>(isa)});

@@ -169,6 +169,40 @@ TEST(Forward, BinningIsOneDepthOrderForAnyThreadCount) {
   }
 }
 
+// Gaussians at exactly equal depths (identity rotation, every other mean on one of three
+// planes z = const, so their depths are the same float) must still be listed in id order
+// within each tile: the depth sort has to keep ties in id order, whatever the thread count.
+// The planes sit at random depths, so their float bits differ in every digit the sort uses.
+TEST(Forward, EqualDepthsAreListedInIdOrder) {
+  std::mt19937 rng(5);
+  Camera cam;
+  cam.width = 96, cam.height = 64;
+  cam.fx = cam.fy = 80.0f, cam.cx = 48.0f, cam.cy = 32.0f;
+  cam.t_cw = {0.0f, 0.0f, 4.0f};
+  SceneSpec spec;
+  spec.count = 1500;
+  spec.spread = 1.0f;
+  GaussianSet g = random_gaussians(rng, spec);
+  std::uniform_real_distribution<float> plane_z(-1.0f, 1.0f);
+  const float planes[3] = {plane_z(rng), plane_z(rng), plane_z(rng)};
+  for (size_t i = 0; i < g.size(); i += 2) g.means[3 * i + 2] = planes[(i / 2) % 3];
+  for (int threads : {1, 2, 3}) {
+    RasterSettings s;
+    s.num_threads = threads;
+    RasterOutput out;
+    rasterize_forward(g.view(), cam, s, out);
+    size_t ties = 0;
+    for (size_t t = 0; t + 1 < out.tile_offsets.size(); ++t)
+      for (int e = out.tile_offsets[t] + 1; e < out.tile_offsets[t + 1]; ++e) {
+        const int32_t a = out.tile_entries[e - 1], b = out.tile_entries[e];
+        ASSERT_TRUE(out.depths[a] < out.depths[b] || (out.depths[a] == out.depths[b] && a < b))
+            << "tile " << t << ", " << threads << " threads";
+        ties += out.depths[a] == out.depths[b];
+      }
+    EXPECT_GT(ties, 300u) << "the scene must list many equal depths next to each other";
+  }
+}
+
 // The tiles and rows a Gaussian is blended in come from its opacity (blend_radii): every
 // pixel where o·e^−σ reaches 1/255, computed here in double from the conic, must lie
 // inside that box, and the box never exceeds the 3.33σ one. Opacities span 10⁻³…1, so some

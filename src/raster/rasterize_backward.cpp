@@ -8,6 +8,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "raster/prefetch.hpp"
 #include "raster/stage_math.hpp"
 #include "raster/tile_kernels.hpp"
 #include "raster/tiles.hpp"
@@ -77,6 +78,10 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
     std::fill_n(&grads.means2d[2 * i], 2, 0.0f);
     std::fill_n(&grads.rgb[3 * i], 3, 0.0f);
     grads.opacity_logits[i] = grads.absgrad[i] = 0.0f;
+    if (const int64_t ahead = i + kRowPrefetchDistance; ahead < static_cast<int64_t>(n)) {
+      prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
+      prefetch_row_for_write(&grads.colors[color_stride * ahead], color_stride);
+    }
     if (!fw.visible[i]) continue;
     // A fixed-size array so the 12 slots add as three 4-wide vectors (a plain loop compiled
     // to scalar adds); each slot still sums its entries in the same order, so the bits hold.

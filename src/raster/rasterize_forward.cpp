@@ -1,11 +1,14 @@
 // Forward pass: per-Gaussian projection, tile binning, per-tile front-to-back blending.
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
+#include "raster/prefetch.hpp"
 #include "raster/stage_math.hpp"
 #include "raster/tile_kernels.hpp"
 #include "raster/tiles.hpp"
@@ -45,6 +48,8 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = out.rgb[3 * i + k] = 0.0f, out.color_clamped[3 * i + k] = 0;
     for (int k = 0; k < kChordFloats; ++k) out.splats[i].chord[k] = 0.0f;
     out.depths[i] = out.opacity[i] = 0.0f;
+    if (const int64_t ahead = i + kRowPrefetchDistance; ahead < n)
+      prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
     const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
     const Vec3<float> p = W * mean + t;
     if (!(p[2] > s.near_plane && p[2] < s.far_plane)) continue;  // also rejects NaN
@@ -85,6 +90,26 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
   }
 }
 
+// Sorts keys (depth bits << 32 | id) that were appended in increasing id by their depth:
+// a stable LSD radix sort on the depth's 32 bits, three digits of 11 bits. Stability keeps
+// equal depths in id order, so the result is the ascending order of the whole keys, as a
+// comparison sort of them gives, in three linear passes (a digit all keys share is skipped).
+void sort_by_depth(std::vector<uint64_t>& keys, std::vector<uint64_t>& scratch) {
+  constexpr int kDigitBits = 11;
+  constexpr uint64_t kDigitMask = (1u << kDigitBits) - 1;
+  if (keys.size() < 2) return;
+  scratch.resize(keys.size());
+  for (int shift = 32; shift < 64; shift += kDigitBits) {
+    std::array<uint32_t, kDigitMask + 1> start{};
+    for (uint64_t k : keys) ++start[(k >> shift) & kDigitMask];
+    if (start[(keys[0] >> shift) & kDigitMask] == keys.size()) continue;
+    uint32_t sum = 0;
+    for (uint32_t& c : start) sum += std::exchange(c, sum);
+    for (uint64_t k : keys) scratch[start[(k >> shift) & kDigitMask]++] = k;
+    keys.swap(scratch);
+  }
+}
+
 // Builds the depth-sorted per-tile work lists. Visible Gaussians are sorted once by
 // (depth, id) and appended to their tiles in that order, which yields the same per-tile
 // order as gsplat's radix sort of (tile, depth) keys. The fill runs in parallel over
@@ -120,7 +145,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   // whatever the thread count; each chunk also counts its Gaussians' entries per tile.
   const int chunks = std::max(1, threads);
   const int tiles = grid.count();
-  std::vector<std::vector<uint64_t>> chunk_keys(chunks);
+  std::vector<std::vector<uint64_t>> chunk_keys(chunks), chunk_scratch(chunks);
   std::vector<int32_t> chunk_counts(size_t(chunks) * tiles, 0);
 #pragma omp parallel for num_threads(threads) schedule(static, 1)
   for (int ch = 0; ch < chunks; ++ch) {
@@ -135,7 +160,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
       for (int ty = r.y0; ty < r.y1; ++ty)
         for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * grid.tiles_x + tx];
     }
-    std::sort(keys.begin(), keys.end());
+    sort_by_depth(keys, chunk_scratch[ch]);
   }
   std::vector<uint64_t> keys = std::move(chunk_keys[0]), merged;
   for (int ch = 1; ch < chunks; ++ch) {
