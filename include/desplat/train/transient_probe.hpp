@@ -42,8 +42,9 @@ struct TransientRules {
   // A view holds a transient when its counted areas cover at least this share of the frame;
   // the scene has transients when at least min_views_share of its views (and at least 2) do.
   // 3 %: on clean captures the probe's own misfit passes the neighbour test in areas of up to
-  // 2.7 % of a view (fox and four synthetic scenes, several seeds), often in 2–4 views; the
-  // transients tested cover several times that (docs/bench/issue15_effects.md).
+  // 2.75 % of a view (38 probes: the fox at three sizes, its 24-view subset and `fox_expo`,
+  // and five clean synthetic scenes, several seeds each), often in 2–4 views; the transients
+  // tested cover 8–47 views at 3 % or more (docs/bench/issue15_effects.md).
   float view_share = 0.03f;
   float min_views_share = 0.05f;
 };
