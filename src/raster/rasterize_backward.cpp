@@ -8,6 +8,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "raster/gaussian_lanes.hpp"
 #include "raster/prefetch.hpp"
 #include "raster/stage_math.hpp"
 #include "raster/tile_kernels.hpp"
@@ -60,73 +61,98 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
                           dL_ddepth.empty() ? nullptr : dL_ddepth.data(), entry_grads);
 
   const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
-  const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
-  const Vec3<float> t(cam.t_cw[0], cam.t_cw[1], cam.t_cw[2]);
+  const LaneCamera lane_cam(cam.R_cw.data(), cam.t_cw.data(), K, s.eps2d, s.near_plane, s.far_plane);
   const auto cc = cam.center();
   const Vec3<float> center(cc[0], cc[1], cc[2]);
   const bool sh_mode = g.color_mode == ColorMode::SphericalHarmonics;
   const int sh_degree = sh_mode ? (s.active_sh_degree < 0 ? g.sh_degree : s.active_sh_degree) : 0;
+  const int64_t count = static_cast<int64_t>(n);
+  const int64_t blocks = (count + kLanes - 1) / kLanes;
 
+  // Per block of kLanes Gaussians: sum each one's entries, chain opacity and colour one by
+  // one, then the geometry (conic → projection → scales and rotation) in vector lanes.
 #pragma omp parallel for num_threads(threads) schedule(static)
-  for (int64_t i = 0; i < static_cast<int64_t>(n); ++i) {
-    // Zero the row first: an invisible Gaussian's gradient is zero, and the chain rule
-    // below adds into the colour, scale and rotation gradients.
-    std::fill_n(&grads.means[3 * i], 3, 0.0f);
-    std::fill_n(&grads.log_scales[3 * i], 3, 0.0f);
-    std::fill_n(&grads.quats[4 * i], 4, 0.0f);
-    std::fill_n(&grads.colors[color_stride * i], color_stride, 0.0f);
-    std::fill_n(&grads.means2d[2 * i], 2, 0.0f);
-    std::fill_n(&grads.rgb[3 * i], 3, 0.0f);
-    grads.opacity_logits[i] = grads.absgrad[i] = 0.0f;
-    if (const int64_t ahead = i + kRowPrefetchDistance; ahead < static_cast<int64_t>(n)) {
-      prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
-      prefetch_row_for_write(&grads.colors[color_stride * ahead], color_stride);
-    }
-    if (!fw.visible[i]) continue;
-    // A fixed-size array so the 12 slots add as three 4-wide vectors (a plain loop compiled
-    // to scalar adds); each slot still sums its entries in the same order, so the bits hold.
-    using EntryRecord = Eigen::Array<float, kEntrySlots, 1>;
-    EntryRecord sum = EntryRecord::Zero();
-    for (int32_t e = fw.gaussian_offsets[i]; e < fw.gaussian_offsets[i + 1]; ++e)
-      sum += Eigen::Map<const EntryRecord>(entry_grads + size_t(e) * kEntrySlots);
-    grads.means2d[2 * i] = sum[kMx];
-    grads.means2d[2 * i + 1] = sum[kMy];
-    grads.absgrad[i] = std::hypot(sum[kAbsX], sum[kAbsY]);
-
-    // Opacity: o = sigmoid(logit).
-    const float o = fw.opacity[i];
-    grads.opacity_logits[i] = sum[kO] * o * (1.0f - o);
-
-    // Color: the caller's change of the colour (rgb_scale), then the clamp, which passes the
-    // gradient only where it was inactive.
-    Vec3<float> d_rgb;
-    for (int ch = 0; ch < 3; ++ch) {
-      grads.rgb[3 * i + ch] = sum[kR + ch];
-      const float scaled = rgb_scale.empty() ? sum[kR + ch] : rgb_scale[3 * i + ch] * sum[kR + ch];
-      d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : scaled;
-    }
-    const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
-    Vec3<float> d_mean = Vec3<float>::Zero();
-    float* d_colors = &grads.colors[color_stride * i];
-    if (sh_mode) {
-      evaluate_color_sh_vjp(sh_degree, &g.colors[color_stride * i], mean, center, d_rgb, d_colors, d_mean);
-    } else {
-      for (int ch = 0; ch < 3; ++ch) d_colors[ch] = d_rgb[ch];
+  for (int64_t b = 0; b < blocks; ++b) {
+    const int64_t i0 = b * kLanes;
+    const int lanes = static_cast<int>(std::min<int64_t>(kLanes, count - i0));
+    LaneGaussians geo;
+    LaneGradientsIn d_in;
+    bool any_visible = false;
+    for (int l = 0; l < kLanes; ++l) {
+      const int64_t i = i0 + std::min(l, lanes - 1);
+      const bool used = l < lanes && fw.visible[i];
+      any_visible |= used;
+      for (int k = 0; k < 3; ++k) geo.mean[k][l] = g.means[3 * i + k], geo.scale[k][l] = std::exp(g.log_scales[3 * i + k]);
+      for (int k = 0; k < 4; ++k) geo.quat[k][l] = g.quats[4 * i + k];
+      for (int k = 0; k < 3; ++k) d_in.conic[k][l] = fw.conics[3 * i + k], d_in.d_conic[k][l] = 0.0f;
+      d_in.d_mean2d[0][l] = d_in.d_mean2d[1][l] = d_in.d_depth[l] = 0.0f;
     }
 
-    // Conic → 2D covariance → camera-space point and covariance → 3D parameters.
-    const Vec3<float> conic(fw.conics[3 * i], fw.conics[3 * i + 1], fw.conics[3 * i + 2]);
-    const Mat2<float> d_cov2d = conic_vjp(conic, Vec3<float>(sum[kA], sum[kB2], sum[kC]));
-    const Vec3<float> p = W * mean + t;
-    const Mat3<float> Sigma = covariance_3d<float>(&g.log_scales[3 * i], &g.quats[4 * i]);
-    const Mat3<float> V = W * Sigma * W.transpose();
-    Vec3<float> d_p;
-    Mat3<float> d_V;
-    project_ewa_vjp(p, V, K, Vec2<float>(sum[kMx], sum[kMy]), d_cov2d, sum[kZ], d_p, d_V);
-    d_mean += W.transpose() * d_p;
-    covariance_3d_vjp(&g.log_scales[3 * i], &g.quats[4 * i], W.transpose() * d_V * W,
-                      &grads.log_scales[3 * i], &grads.quats[4 * i]);
-    for (int k = 0; k < 3; ++k) grads.means[3 * i + k] = d_mean[k];
+    for (int l = 0; l < lanes; ++l) {
+      const int64_t i = i0 + l;
+      // Zero the row first: an invisible Gaussian's gradient is zero, and the chain rule
+      // below adds into the colour gradients.
+      std::fill_n(&grads.means[3 * i], 3, 0.0f);
+      std::fill_n(&grads.log_scales[3 * i], 3, 0.0f);
+      std::fill_n(&grads.quats[4 * i], 4, 0.0f);
+      std::fill_n(&grads.colors[color_stride * i], color_stride, 0.0f);
+      std::fill_n(&grads.means2d[2 * i], 2, 0.0f);
+      std::fill_n(&grads.rgb[3 * i], 3, 0.0f);
+      grads.opacity_logits[i] = grads.absgrad[i] = 0.0f;
+      if (const int64_t ahead = i + kRowPrefetchDistance; ahead < count) {
+        prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
+        prefetch_row_for_write(&grads.colors[color_stride * ahead], color_stride);
+      }
+      if (!fw.visible[i]) continue;
+      // A fixed-size array so the 12 slots add as three 4-wide vectors (a plain loop compiled
+      // to scalar adds); each slot still sums its entries in the same order, so the bits hold.
+      using EntryRecord = Eigen::Array<float, kEntrySlots, 1>;
+      EntryRecord sum = EntryRecord::Zero();
+      for (int32_t e = fw.gaussian_offsets[i]; e < fw.gaussian_offsets[i + 1]; ++e)
+        sum += Eigen::Map<const EntryRecord>(entry_grads + size_t(e) * kEntrySlots);
+      grads.means2d[2 * i] = sum[kMx];
+      grads.means2d[2 * i + 1] = sum[kMy];
+      grads.absgrad[i] = std::hypot(sum[kAbsX], sum[kAbsY]);
+      d_in.d_mean2d[0][l] = sum[kMx], d_in.d_mean2d[1][l] = sum[kMy];
+      d_in.d_conic[0][l] = sum[kA], d_in.d_conic[1][l] = sum[kB2], d_in.d_conic[2][l] = sum[kC];
+      d_in.d_depth[l] = sum[kZ];
+
+      // Opacity: o = sigmoid(logit).
+      const float o = fw.opacity[i];
+      grads.opacity_logits[i] = sum[kO] * o * (1.0f - o);
+
+      // Color: the caller's change of the colour (rgb_scale), then the clamp, which passes the
+      // gradient only where it was inactive. Its pull on the mean (SH direction) goes into
+      // grads.means, to which the projection's share is added below.
+      Vec3<float> d_rgb;
+      for (int ch = 0; ch < 3; ++ch) {
+        grads.rgb[3 * i + ch] = sum[kR + ch];
+        const float scaled = rgb_scale.empty() ? sum[kR + ch] : rgb_scale[3 * i + ch] * sum[kR + ch];
+        d_rgb[ch] = fw.color_clamped[3 * i + ch] ? 0.0f : scaled;
+      }
+      float* d_colors = &grads.colors[color_stride * i];
+      if (sh_mode) {
+        const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
+        Vec3<float> d_mean = Vec3<float>::Zero();
+        evaluate_color_sh_vjp(sh_degree, &g.colors[color_stride * i], mean, center, d_rgb, d_colors, d_mean);
+        for (int k = 0; k < 3; ++k) grads.means[3 * i + k] = d_mean[k];
+      } else {
+        for (int ch = 0; ch < 3; ++ch) d_colors[ch] = d_rgb[ch];
+      }
+    }
+    if (!any_visible) continue;
+
+    LaneGeometry geometry;
+    geometry_lanes(lane_cam, geo, geometry);
+    LaneGradientsOut d_out;
+    backward_lanes(lane_cam, geo, geometry.rot, geometry.V, d_in, d_out);
+    for (int l = 0; l < lanes; ++l) {
+      const int64_t i = i0 + l;
+      if (!fw.visible[i]) continue;
+      for (int k = 0; k < 3; ++k) grads.means[3 * i + k] += d_out.d_mean[k][l];
+      for (int k = 0; k < 3; ++k) grads.log_scales[3 * i + k] = d_out.d_log_scale[k][l];
+      for (int k = 0; k < 4; ++k) grads.quats[4 * i + k] = d_out.d_quat[k][l];
+    }
   }
 }
 

@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "raster/gaussian_lanes.hpp"
 #include "raster/prefetch.hpp"
 #include "raster/stage_math.hpp"
 #include "raster/tile_kernels.hpp"
@@ -26,67 +27,77 @@ int effective_sh_degree(const GaussianView& g, const RasterSettings& s) {
   return d;
 }
 
-// Projection, culling, color and opacity for every Gaussian (docs/METHOD.md §3).
+// Projection, culling, color and opacity for every Gaussian (docs/METHOD.md §3). The
+// geometry runs kLanes Gaussians at a time in vector lanes (gaussian_lanes.hpp); colour,
+// opacity and the blend box follow per visible Gaussian.
 void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& s, int sh_degree,
                 RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(g.size());
   const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
-  const Mat3<float> W = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(cam.R_cw.data());
-  const Vec3<float> t(cam.t_cw[0], cam.t_cw[1], cam.t_cw[2]);
+  const LaneCamera lane_cam(cam.R_cw.data(), cam.t_cw.data(), K, s.eps2d, s.near_plane, s.far_plane);
   const auto c = cam.center();
   const Vec3<float> center(c[0], c[1], c[2]);
   const bool sh_mode = g.color_mode == ColorMode::SphericalHarmonics;
   const int color_stride = g.color_floats_per_gaussian();
+  const int64_t blocks = (n + kLanes - 1) / kLanes;
 
 #pragma omp parallel for num_threads(thread_count(s)) schedule(static)
-  for (int64_t i = 0; i < n; ++i) {
-    // An invisible Gaussian's entries are zero (raster.hpp); a visible one's are all set below.
-    out.radii[2 * i] = out.radii[2 * i + 1] = 0;
-    out.blend_radii[2 * i] = out.blend_radii[2 * i + 1] = 0;
-    out.visible[i] = 0;
-    out.means2d[2 * i] = out.means2d[2 * i + 1] = 0.0f;
-    for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = out.rgb[3 * i + k] = 0.0f, out.color_clamped[3 * i + k] = 0;
-    for (int k = 0; k < kChordFloats; ++k) out.splats[i].chord[k] = 0.0f;
-    out.depths[i] = out.opacity[i] = 0.0f;
-    if (const int64_t ahead = i + kRowPrefetchDistance; ahead < n)
-      prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
-    const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
-    const Vec3<float> p = W * mean + t;
-    if (!(p[2] > s.near_plane && p[2] < s.far_plane)) continue;  // also rejects NaN
-    const Mat3<float> V = W * covariance_3d<float>(&g.log_scales[3 * i], &g.quats[4 * i]) * W.transpose();
-    const Projection<float> proj = project_ewa<float>(p, V, K, s.eps2d);
-    float det = 0;
-    const Vec3<float> conic = conic_from_cov2d<float>(proj.cov2d, &det);
-    if (!(det > 0) || !conic.allFinite() || !proj.mean2d.allFinite()) continue;
-    const float rx = std::min(kMaxRadius, std::ceil(kExtentSigmas * std::sqrt(proj.cov2d(0, 0))));
-    const float ry = std::min(kMaxRadius, std::ceil(kExtentSigmas * std::sqrt(proj.cov2d(1, 1))));
-    if (!(rx > 0 && ry > 0)) continue;
-    const float mx = proj.mean2d[0], my = proj.mean2d[1];
-    if (mx + rx <= 0 || mx - rx >= cam.width || my + ry <= 0 || my - ry >= cam.height) continue;
-
-    const float opacity = sigmoid(g.opacity_logits[i]);
-    Vec3<float> color = evaluate_color<float>(sh_mode, sh_degree, &g.colors[color_stride * i], mean, center);
-    for (int ch = 0; ch < 3; ++ch) {
-      const float lo = 0.0f, hi = sh_mode ? INFINITY : 1.0f;
-      out.color_clamped[3 * i + ch] = !(color[ch] >= lo && color[ch] <= hi);
-      color[ch] = std::clamp(std::isfinite(color[ch]) ? color[ch] : 0.0f, lo, hi);
+  for (int64_t b = 0; b < blocks; ++b) {
+    const int64_t i0 = b * kLanes;
+    const int lanes = static_cast<int>(std::min<int64_t>(kLanes, n - i0));
+    LaneGaussians in;
+    for (int l = 0; l < kLanes; ++l) {
+      const int64_t i = i0 + std::min(l, lanes - 1);
+      for (int k = 0; k < 3; ++k) in.mean[k][l] = g.means[3 * i + k], in.scale[k][l] = std::exp(g.log_scales[3 * i + k]);
+      for (int k = 0; k < 4; ++k) in.quat[k][l] = g.quats[4 * i + k];
+      if (l >= lanes) in.mean[2][l] = NAN;  // padding: never visible
     }
-    out.means2d[2 * i] = mx;
-    out.means2d[2 * i + 1] = my;
-    for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = conic[k];
-    out.radii[2 * i] = static_cast<int32_t>(rx);
-    out.radii[2 * i + 1] = static_cast<int32_t>(ry);
-    // Tiles and rows are visited only where α can reach 1/255; the 3.33σ radii above still
-    // decide visibility and the screen size that density control reads.
-    const float k = opacity_extent_sigmas(opacity);
-    out.blend_radii[2 * i] = static_cast<int32_t>(std::min(rx, std::ceil(k * std::sqrt(proj.cov2d(0, 0)))));
-    out.blend_radii[2 * i + 1] = static_cast<int32_t>(std::min(ry, std::ceil(k * std::sqrt(proj.cov2d(1, 1)))));
-    chord_shape(conic[0], conic[1], conic[2], opacity, out.blend_radii[2 * i], out.blend_radii[2 * i + 1],
-                out.splats[i].chord);
-    out.depths[i] = p[2];
-    out.opacity[i] = opacity;
-    for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
-    out.visible[i] = 1;
+    LaneGeometry geometry;
+    geometry_lanes(lane_cam, in, geometry);
+    LaneProjection proj;
+    project_lanes(lane_cam, in, geometry.V, proj);
+
+    for (int l = 0; l < lanes; ++l) {
+      const int64_t i = i0 + l;
+      if (const int64_t ahead = i + kRowPrefetchDistance; ahead < n)
+        prefetch_row_for_read(&g.colors[color_stride * ahead], color_stride);
+      if (!proj.visible[l]) {
+        // An invisible Gaussian's entries are zero (raster.hpp).
+        out.radii[2 * i] = out.radii[2 * i + 1] = 0;
+        out.blend_radii[2 * i] = out.blend_radii[2 * i + 1] = 0;
+        out.visible[i] = 0;
+        out.means2d[2 * i] = out.means2d[2 * i + 1] = 0.0f;
+        for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = out.rgb[3 * i + k] = 0.0f, out.color_clamped[3 * i + k] = 0;
+        for (int k = 0; k < kChordFloats; ++k) out.splats[i].chord[k] = 0.0f;
+        out.depths[i] = out.opacity[i] = 0.0f;
+        continue;
+      }
+      const Vec3<float> mean(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
+      const float opacity = sigmoid(g.opacity_logits[i]);
+      Vec3<float> color = evaluate_color<float>(sh_mode, sh_degree, &g.colors[color_stride * i], mean, center);
+      for (int ch = 0; ch < 3; ++ch) {
+        const float lo = 0.0f, hi = sh_mode ? INFINITY : 1.0f;
+        out.color_clamped[3 * i + ch] = !(color[ch] >= lo && color[ch] <= hi);
+        color[ch] = std::clamp(std::isfinite(color[ch]) ? color[ch] : 0.0f, lo, hi);
+      }
+      out.means2d[2 * i] = proj.mean2d[0][l];
+      out.means2d[2 * i + 1] = proj.mean2d[1][l];
+      for (int k = 0; k < 3; ++k) out.conics[3 * i + k] = proj.conic[k][l];
+      const float rx = proj.radius[0][l], ry = proj.radius[1][l];
+      out.radii[2 * i] = static_cast<int32_t>(rx);
+      out.radii[2 * i + 1] = static_cast<int32_t>(ry);
+      // Tiles and rows are visited only where α can reach 1/255; the 3.33σ radii above still
+      // decide visibility and the screen size that density control reads.
+      const float k = opacity_extent_sigmas(opacity);
+      out.blend_radii[2 * i] = static_cast<int32_t>(std::min(rx, std::ceil(k * std::sqrt(proj.cov2d[0][l]))));
+      out.blend_radii[2 * i + 1] = static_cast<int32_t>(std::min(ry, std::ceil(k * std::sqrt(proj.cov2d[2][l]))));
+      chord_shape(proj.conic[0][l], proj.conic[1][l], proj.conic[2][l], opacity, out.blend_radii[2 * i],
+                  out.blend_radii[2 * i + 1], out.splats[i].chord);
+      out.depths[i] = proj.p[2][l];
+      out.opacity[i] = opacity;
+      for (int ch = 0; ch < 3; ++ch) out.rgb[3 * i + ch] = color[ch];
+      out.visible[i] = 1;
+    }
   }
 }
 
@@ -117,11 +128,8 @@ void sort_by_depth(std::vector<uint64_t>& keys, std::vector<uint64_t>& scratch) 
 // tiles, so there are no races and the result does not depend on the thread count.
 void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(out.visible.size());
-  auto rect_of = [&](int64_t i) {  // the tiles a Gaussian is listed in; none when α < 1/255 everywhere
-    if (out.blend_radii[2 * i] == 0 || out.blend_radii[2 * i + 1] == 0) return TileRect{0, 0, 0, 0};
-    return tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.blend_radii[2 * i],
-                     out.blend_radii[2 * i + 1]);
-  };
+  // Each Gaussian's tiles, worked out once: none when α < 1/255 everywhere.
+  std::vector<TileRect> rects(n);
   out.gaussian_offsets.assign(n + 1, 0);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
@@ -130,7 +138,11 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     if (out.visible[i] &&
         tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.radii[2 * i], out.radii[2 * i + 1]).area() == 0)
       out.visible[i] = 0;
-    const int listed = out.visible[i] ? rect_of(i).area() : 0;
+    const bool blended = out.visible[i] && out.blend_radii[2 * i] != 0 && out.blend_radii[2 * i + 1] != 0;
+    rects[i] = blended ? tile_rect(grid, out.means2d[2 * i], out.means2d[2 * i + 1], out.blend_radii[2 * i],
+                                   out.blend_radii[2 * i + 1])
+                       : TileRect{0, 0, 0, 0};
+    const int listed = rects[i].area();
     out.gaussian_offsets[i + 1] = listed;
     if (listed == 0) continue;
     TileSplat& sp = out.splats[i];
@@ -156,7 +168,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     for (int64_t i = lo; i < hi; ++i) {
       if (!out.visible[i]) continue;
       keys.push_back(uint64_t(std::bit_cast<uint32_t>(out.depths[i])) << 32 | uint64_t(i));
-      const TileRect r = rect_of(i);
+      const TileRect r = rects[i];
       for (int ty = r.y0; ty < r.y1; ++ty)
         for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * grid.tiles_x + tx];
     }
@@ -168,11 +180,21 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     std::merge(keys.begin(), keys.end(), chunk_keys[ch].begin(), chunk_keys[ch].end(), merged.begin());
     keys.swap(merged);
   }
-  std::vector<int32_t> order(keys.size());
-  for (size_t k = 0; k < keys.size(); ++k) order[k] = static_cast<int32_t>(keys[k] & 0xffffffffu);
   std::partial_sum(out.gaussian_offsets.begin(), out.gaussian_offsets.end(), out.gaussian_offsets.begin());
   const int64_t entries = out.gaussian_offsets[n];
   if (entries > INT32_MAX) throw std::runtime_error("too many tile–Gaussian intersections");
+  // The Gaussians in depth order with what the fill reads of each, so its threads walk one
+  // array in order instead of gathering from three by id.
+  struct Listed {
+    int32_t id, first_record;
+    TileRect rect;
+  };
+  std::vector<Listed> listed;
+  listed.reserve(keys.size());
+  for (uint64_t key : keys) {
+    const int32_t i = static_cast<int32_t>(key & 0xffffffffu);
+    if (rects[i].area() > 0) listed.push_back({i, out.gaussian_offsets[i], rects[i]});
+  }
 
   // Tile counts (summed over the chunks), then CSR offsets.
   out.tile_offsets.assign(tiles + 1, 0);
@@ -196,15 +218,15 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     if (y_lo >= y_hi) continue;
     std::vector<int32_t> cursor(out.tile_offsets.begin() + y_lo * grid.tiles_x,
                                 out.tile_offsets.begin() + y_hi * grid.tiles_x);
-    for (int32_t i : order) {
-      const TileRect r = rect_of(i);
+    for (const Listed& g : listed) {
+      const TileRect& r = g.rect;
       const int ty0 = std::max(r.y0, y_lo), ty1 = std::min(r.y1, y_hi);
       for (int ty = ty0; ty < ty1; ++ty)
         for (int tx = r.x0; tx < r.x1; ++tx) {
           const int32_t pos = cursor[(ty - y_lo) * grid.tiles_x + tx]++;
-          out.tile_entries[pos] = i;
+          out.tile_entries[pos] = g.id;
           // A Gaussian's records follow row-major order over its rectangle.
-          out.record_of_entry[pos] = out.gaussian_offsets[i] + (ty - r.y0) * (r.x1 - r.x0) + (tx - r.x0);
+          out.record_of_entry[pos] = g.first_record + (ty - r.y0) * (r.x1 - r.x0) + (tx - r.x0);
         }
     }
   }
