@@ -29,12 +29,9 @@ struct LaneCamera {
     for (int k = 0; k < 9; ++k) W[k] = R_cw_row_major[k];
     for (int k = 0; k < 3; ++k) t[k] = t_cw[k];
     fx = K.fx, fy = K.fy, cx = K.cx, cy = K.cy, eps2d = eps;
-    // As project_ewa computes them (double, then float).
-    const double tan_fovx = 0.5 * K.width / K.fx, tan_fovy = 0.5 * K.height / K.fy;
-    lim_x_pos = float((K.width - K.cx) / K.fx + 0.3 * tan_fovx);
-    lim_x_neg = float(K.cx / K.fx + 0.3 * tan_fovx);
-    lim_y_pos = float((K.height - K.cy) / K.fy + 0.3 * tan_fovy);
-    lim_y_neg = float(K.cy / K.fy + 0.3 * tan_fovy);
+    const FovLimits lim = fov_limits(K);
+    lim_x_pos = float(lim.x_pos), lim_x_neg = float(lim.x_neg);
+    lim_y_pos = float(lim.y_pos), lim_y_neg = float(lim.y_neg);
     near_plane = near, far_plane = far, width = float(K.width), height = float(K.height);
   }
 };

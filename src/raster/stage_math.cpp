@@ -48,11 +48,9 @@ void project_ewa_vjp(const Vec3<float>& p, const Mat3<float>& V, const PinholeIn
                      Vec3<float>& d_p, Mat3<float>& d_V) {
   const float x = p[0], y = p[1], z = p[2];
   const float rz = 1.0f / z, rz2 = rz * rz, rz3 = rz2 * rz;
-  const double tan_fovx = 0.5 * K.width / K.fx, tan_fovy = 0.5 * K.height / K.fy;
-  const float lim_x_pos = float((K.width - K.cx) / K.fx + 0.3 * tan_fovx);
-  const float lim_x_neg = float(K.cx / K.fx + 0.3 * tan_fovx);
-  const float lim_y_pos = float((K.height - K.cy) / K.fy + 0.3 * tan_fovy);
-  const float lim_y_neg = float(K.cy / K.fy + 0.3 * tan_fovy);
+  const FovLimits lim = fov_limits(K);
+  const float lim_x_pos = float(lim.x_pos), lim_x_neg = float(lim.x_neg);
+  const float lim_y_pos = float(lim.y_pos), lim_y_neg = float(lim.y_neg);
   const float txz = x * rz, tyz = y * rz;
   const bool x_free = txz <= lim_x_pos && txz >= -lim_x_neg;  // clamp inactive
   const bool y_free = tyz <= lim_y_pos && tyz >= -lim_y_neg;

@@ -104,6 +104,18 @@ struct PinholeIntrinsics {
   int width, height;
 };
 
+// How far x/z and y/z may reach before the projection's Jacobian clamps them: the image's
+// field of view widened by 30 % of its half-width tangent on each side (in double, as every
+// caller casts it).
+struct FovLimits {
+  double x_pos, x_neg, y_pos, y_neg;
+};
+inline FovLimits fov_limits(const PinholeIntrinsics& K) {
+  const double tan_fovx = 0.5 * K.width / K.fx, tan_fovy = 0.5 * K.height / K.fy;
+  return {(K.width - K.cx) / K.fx + 0.3 * tan_fovx, K.cx / K.fx + 0.3 * tan_fovx,
+          (K.height - K.cy) / K.fy + 0.3 * tan_fovy, K.cy / K.fy + 0.3 * tan_fovy};
+}
+
 template <typename T> struct Projection {
   Vec2<T> mean2d;  // [px]
   Mat2<T> cov2d;   // with the eps2d blur [px²]
@@ -117,11 +129,9 @@ Projection<T> project_ewa(const Vec3<T>& p, const Mat3<T>& V, const PinholeIntri
                           float eps2d) {
   const T x = p[0], y = p[1], z = p[2];
   const T rz = T(1) / z;
-  const double tan_fovx = 0.5 * K.width / K.fx, tan_fovy = 0.5 * K.height / K.fy;
-  const T lim_x_pos = T((K.width - K.cx) / K.fx + 0.3 * tan_fovx);
-  const T lim_x_neg = T(K.cx / K.fx + 0.3 * tan_fovx);
-  const T lim_y_pos = T((K.height - K.cy) / K.fy + 0.3 * tan_fovy);
-  const T lim_y_neg = T(K.cy / K.fy + 0.3 * tan_fovy);
+  const FovLimits lim = fov_limits(K);
+  const T lim_x_pos = T(lim.x_pos), lim_x_neg = T(lim.x_neg);
+  const T lim_y_pos = T(lim.y_pos), lim_y_neg = T(lim.y_neg);
   const T tx = z * std::min(lim_x_pos, std::max(T(-lim_x_neg), T(x * rz)));
   const T ty = z * std::min(lim_y_pos, std::max(T(-lim_y_neg), T(y * rz)));
   Mat23<T> J;
