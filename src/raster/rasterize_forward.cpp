@@ -189,11 +189,13 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     int32_t id, first_record;
     TileRect rect;
   };
-  std::vector<Listed> listed;
-  listed.reserve(keys.size());
-  for (uint64_t key : keys) {
-    const int32_t i = static_cast<int32_t>(key & 0xffffffffu);
-    if (rects[i].area() > 0) listed.push_back({i, out.gaussian_offsets[i], rects[i]});
+  // Built on the threads; a Gaussian listed in no tile keeps its empty rectangle, which the
+  // fill passes over.
+  std::vector<Listed> listed(keys.size());
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (size_t k = 0; k < keys.size(); ++k) {
+    const int32_t i = static_cast<int32_t>(keys[k] & 0xffffffffu);
+    listed[k] = {i, out.gaussian_offsets[i], rects[i]};
   }
 
   // Tile counts (summed over the chunks), then CSR offsets.

@@ -312,14 +312,25 @@ double psnr(std::span<const float> a, std::span<const float> b, std::span<const 
   if (a.size() != b.size() || a.empty()) throw std::invalid_argument("psnr: image sizes differ or are empty");
   if (a.size() % 3 != 0) throw std::invalid_argument("psnr: the images are not RGB (3 floats per pixel)");
   check_keep(keep, a.size() / 3);
-  double mse = 0, n = 0;
-  for (size_t p = 0; p < a.size() / 3; ++p) {
-    const double k = keep.empty() ? 1.0 : keep[p];
-    for (size_t i = 3 * p; i < 3 * p + 3; ++i) {
-      mse += k * double(a[i] - b[i]) * (a[i] - b[i]);
-      n += k;
+  // Fixed chunks of pixels, summed on the threads and then in chunk order: the value does
+  // not depend on the thread count.
+  constexpr int64_t kChunk = 4096;
+  const int64_t pixels = int64_t(a.size() / 3), chunks = (pixels + kChunk - 1) / kChunk;
+  std::vector<double> chunk_se(static_cast<size_t>(chunks)), chunk_n(static_cast<size_t>(chunks));
+#pragma omp parallel for schedule(static)
+  for (int64_t c = 0; c < chunks; ++c) {
+    double se = 0, kept = 0;
+    for (int64_t p = c * kChunk; p < std::min(pixels, (c + 1) * kChunk); ++p) {
+      const double k = keep.empty() ? 1.0 : keep[size_t(p)];
+      for (size_t i = 3 * size_t(p); i < 3 * size_t(p) + 3; ++i) {
+        se += k * double(a[i] - b[i]) * (a[i] - b[i]);
+        kept += k;
+      }
     }
+    chunk_se[size_t(c)] = se, chunk_n[size_t(c)] = kept;
   }
+  double mse = 0, n = 0;
+  for (int64_t c = 0; c < chunks; ++c) mse += chunk_se[size_t(c)], n += chunk_n[size_t(c)];
   if (n == 0) return INFINITY;  // nothing kept: nothing differs
   mse /= n;
   return mse > 0 ? -10.0 * std::log10(mse) : INFINITY;

@@ -99,7 +99,10 @@ void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const Ras
   // every count starts at 1.
   const bool first = statistics_empty;
   statistics_empty = false;
-  for (size_t i = 0; i < size(); ++i) {
+  // Every Gaussian's statistics are its own: the rows go to the threads.
+  const int64_t n = static_cast<int64_t>(size());
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
     if (first && rules.visible_count_from_one) visible_count[i] += 1;
     if (!fw.visible[i] && !(first && !rules.visible_count_from_one)) continue;
     absgrad_sum[i] += grads.absgrad[i] * grad_scale;
