@@ -216,6 +216,11 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
     for (int j = 0; j < S * S; ++j) T[j] = 1, last[j] = -1, gr[j] = gg[j] = gb[j] = gd[j] = Q[j] = 0;
   // Row by row, one loop per input, so each is a plain (vectorizable) copy.
   int max_last = -1;
+  // Per row, its last blended entry: a row whose pixels all stopped in front of entry k has
+  // nothing to add for k (every lane's in_list would be 0), so the walk skips it. `last` does
+  // not change during the walk, so this is one table per tile.
+  alignas(64) int32_t row_last[S];
+  std::fill_n(row_last, S, -1);
   for (int r = 0; r < rows; ++r) {
     const int64_t p0 = int64_t(y0 + r) * fw.width + x0;
     float *t = &T[r * S], *q = &Q[r * S], *cr = &gr[r * S], *cg = &gg[r * S], *cb = &gb[r * S], *cd = &gd[r * S];
@@ -226,6 +231,7 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
       l[col] = fw.last_contributor[p0 + col];
       max_last = std::max(max_last, l[col]);
     }
+    for (int col = 0; col < cols; ++col) row_last[r] = std::max(row_last[r], l[col]);
     if (dC) {
 #pragma omp simd
       for (int col = 0; col < cols; ++col)
@@ -270,7 +276,7 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
       const int rh0 = row_h0[r], rh1 = row_h1[r];
-      if (rh0 > rh1) continue;
+      if (rh0 > rh1 || k > row_last[r]) continue;
       for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd
         for (int col = first; col < first + decltype(width)::value; ++col) {
