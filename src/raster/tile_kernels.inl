@@ -225,13 +225,15 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
     const int64_t p0 = int64_t(y0 + r) * fw.width + x0;
     float *t = &T[r * S], *q = &Q[r * S], *cr = &gr[r * S], *cg = &gg[r * S], *cb = &gb[r * S], *cd = &gd[r * S];
     int32_t* l = &last[r * S];
-#pragma omp simd reduction(max : max_last)
+    int32_t row_max = -1;
+#pragma omp simd reduction(max : row_max)
     for (int col = 0; col < cols; ++col) {
       t[col] = fw.final_transmittance[p0 + col];
       l[col] = fw.last_contributor[p0 + col];
-      max_last = std::max(max_last, l[col]);
+      row_max = std::max(row_max, l[col]);
     }
-    for (int col = 0; col < cols; ++col) row_last[r] = std::max(row_last[r], l[col]);
+    row_last[r] = row_max;
+    max_last = std::max(max_last, row_max);
     if (dC) {
 #pragma omp simd
       for (int col = 0; col < cols; ++col)
