@@ -227,16 +227,19 @@ TEST(MaskedLoss, IgnoredPixelsHaveNoInfluenceAndAllKeptIsTheUnmaskedLoss) {
 
 
 // The SSIM is computed in bands of rows, one per thread, and its backward reads across the
-// bands' edges. Every thread count, including more threads than a band has rows, must give
-// the same value and gradient, bit for bit, with and without a mask.
+// bands' edges; L1 and PSNR are summed per row or chunk. Every thread count, including more
+// threads than a band has rows, must give the same values and gradient, bit for bit, with and
+// without a mask.
 TEST(Loss, SameBitsOnAnyThreadCount) {
   const int saved = omp_get_max_threads();
-  for (const auto& [w, h] : {std::pair{40, 37}, std::pair{17, 13}, std::pair{11, 11}})
+  // 97×90 holds three of the PSNR's chunks of 4,096 pixels.
+  for (const auto& [w, h] : {std::pair{40, 37}, std::pair{17, 13}, std::pair{11, 11}, std::pair{97, 90}})
     for (bool masked : {false, true}) {
       const Images im = random_images(w, h, 9), other = random_images(w, h, 10);
       const std::vector<float> keep = masked ? test_mask(w, h) : std::vector<float>{};
       std::vector<float> first_grad;
       PhotometricLoss first{};
+      double first_psnr = 0;
       for (int threads : {1, 2, 3, 4, 7}) {
         omp_set_num_threads(threads);
         std::vector<float> grad(im.render.size());
@@ -244,10 +247,12 @@ TEST(Loss, SameBitsOnAnyThreadCount) {
         photometric_loss(other.render, other.target, w, h, 0.2f, grad, keep);
         std::fill(grad.begin(), grad.end(), 0.0f);
         const PhotometricLoss got = photometric_loss(im.render, im.target, w, h, 0.2f, grad, keep);
+        const double got_psnr = psnr(im.render, im.target, keep);
         if (threads == 1) {
-          first = got, first_grad = grad;
+          first = got, first_grad = grad, first_psnr = got_psnr;
           continue;
         }
+        EXPECT_EQ(got_psnr, first_psnr);
         EXPECT_EQ(got.loss, first.loss) << w << "x" << h << (masked ? " masked" : "") << ", " << threads << " threads";
         EXPECT_EQ(got.ssim, first.ssim);
         EXPECT_EQ(grad, first_grad) << w << "x" << h << (masked ? " masked" : "") << ", " << threads << " threads";

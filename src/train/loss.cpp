@@ -316,7 +316,11 @@ double psnr(std::span<const float> a, std::span<const float> b, std::span<const 
   // not depend on the thread count.
   constexpr int64_t kChunk = 4096;
   const int64_t pixels = int64_t(a.size() / 3), chunks = (pixels + kChunk - 1) / kChunk;
-  std::vector<double> chunk_se(static_cast<size_t>(chunks)), chunk_n(static_cast<size_t>(chunks));
+  thread_local std::vector<double> se_scratch, n_scratch;  // reused: no allocation per step
+  std::vector<double>& chunk_se = se_scratch;  // the calling thread's; the team below shares them
+  std::vector<double>& chunk_n = n_scratch;
+  chunk_se.assign(static_cast<size_t>(chunks), 0.0);
+  chunk_n.assign(static_cast<size_t>(chunks), 0.0);
 #pragma omp parallel for schedule(static)
   for (int64_t c = 0; c < chunks; ++c) {
     double se = 0, kept = 0;
