@@ -6,6 +6,8 @@
 //     training (docs/METHOD.md §5), seen from its first camera at 540×960;
 //   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
 //     the same camera: the workload of a late training step;
+//   * trained fox at 270×480 (½ size): the full-resolution steps of the issue-16 command
+//     (`desplat_train --data fox --downscale 2`);
 //   * trained fox at 135×240 (the same camera at ¼ size): few pixels per Gaussian, so the
 //     per-Gaussian stages (projection, binning, sorting, the backward's per-Gaussian
 //     half) weigh as in the low-resolution steps of a training run.
@@ -143,6 +145,10 @@ const Scene& scene_for(int64_t id) {
     static const Scene trained = trained_fox_scene();
     return trained;
   }
+  if (id == 2) {
+    static const Scene trained_half = shrunk(trained_fox_scene(), 2);
+    return trained_half;
+  }
   if (id == 4) {
     static const Scene trained_small = shrunk(trained_fox_scene(), 4);
     return trained_small;
@@ -154,7 +160,7 @@ const Scene& scene_for(int64_t id) {
 void run(benchmark::State& state, bool backward) {
   const Scene& scene = scene_for(state.range(0));
   if (scene.gaussians.size() == 0) {
-    state.SkipWithError("set DESPLAT_BENCH_PLY to a trained fox point_cloud.ply for scenes 1 and 4");
+    state.SkipWithError("set DESPLAT_BENCH_PLY to a trained fox point_cloud.ply for scenes 1, 2 and 4");
     return;
   }
   RasterSettings settings;
@@ -188,10 +194,10 @@ void BM_Forward(benchmark::State& state) { run(state, false); }
 void BM_ForwardBackward(benchmark::State& state) { run(state, true); }
 
 // range(0): 100000 / 500000 random Gaussians, 0 = fox at initialization, 1 = a trained
-// fox (DESPLAT_BENCH_PLY), 4 = the trained fox at ¼ size; range(1): threads; range(2): the
-// KernelIsa path.
+// fox (DESPLAT_BENCH_PLY), 2 and 4 = the trained fox at ½ and ¼ size (½: the full-resolution
+// steps of the `--downscale 2` fox run); range(1): threads; range(2): the KernelIsa path.
 void args(benchmark::internal::Benchmark* b) {
-  for (int64_t scene : {100000, 500000, 0, 1, 4})
+  for (int64_t scene : {100000, 500000, 0, 1, 2, 4})
     for (int64_t threads : {1, 2})
       for (KernelIsa isa : {KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512})
         b->Args({scene, threads, static_cast<int64_t>(isa)});

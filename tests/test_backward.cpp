@@ -3,7 +3,10 @@
 // kernel itself.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
+#include <cmath>
+#include <cstring>
 
 #include "support/jet_gradient.hpp"
 #include "support/scenes.hpp"
@@ -270,6 +273,64 @@ TEST(Backward, AbsGradIsSumOfPerPixelAbsoluteGradients) {
     nonzero += want > 0;
   }
   EXPECT_GE(nonzero, 3);
+}
+
+// The backward skips the entries the forward marked blank (RasterOutput::entry_blank: the
+// Gaussian's box reaches the tile, its chord none of the tile's pixel rows). On every
+// pixel-loop path, with thin tilted Gaussians whose boxes hold many such tiles:
+// - no pixel of a blank entry's tile reaches α = 1/255 for its Gaussian (brute force over the
+//   tile, σ in double, a 10⁻³ relative slack for the loops' float rounding);
+// - clearing the flags, so that the backward walks those entries too, changes no bit of any
+//   gradient.
+TEST(Backward, BlankEntriesHoldNothingAndSkippingThemChangesNoBit) {
+  for (const KernelIsa isa : {KernelIsa::Portable, KernelIsa::Avx2, KernelIsa::Avx512}) {
+    if (!cpu_supports(isa)) continue;
+    std::mt19937 rng(17);
+    const Camera cam = random_camera(rng, 96, 80, 70);
+    SceneSpec spec;
+    spec.count = 300;
+    spec.log_scale_min = -4.0f;
+    spec.log_scale_max = -0.5f;
+    const GaussianSet g = random_gaussians(rng, spec);
+    const Loss loss = random_loss(rng, cam);
+    RasterSettings s;
+    s.isa = isa;
+    RasterOutput out;
+    rasterize_forward(g.view(), cam, s, out);
+    ASSERT_EQ(out.entry_blank.size(), out.tile_entries.size());
+    const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
+    int blank = 0;
+    for (size_t t = 0; t + 1 < out.tile_offsets.size(); ++t)
+      for (int e = out.tile_offsets[t]; e < out.tile_offsets[t + 1]; ++e) {
+        if (!out.entry_blank[e]) continue;
+        ++blank;
+        const int i = out.tile_entries[e];
+        const double a = out.conics[3 * i], b = out.conics[3 * i + 1], c = out.conics[3 * i + 2];
+        const int x0 = int(t % tiles_x) * kTileSize, y0 = int(t / tiles_x) * kTileSize;
+        double most = 0;
+        for (int y = y0; y < std::min(y0 + kTileSize, cam.height); ++y)
+          for (int x = x0; x < std::min(x0 + kTileSize, cam.width); ++x) {
+            const double dx = out.means2d[2 * i] - (x + 0.5), dy = out.means2d[2 * i + 1] - (y + 0.5);
+            most = std::max(most, out.opacity[i] * std::exp(-(0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy)));
+          }
+        EXPECT_LT(most, (1.0 + 1e-3) / 255.0) << kernel_isa_name(isa) << " Gaussian " << i << " tile " << t;
+      }
+    EXPECT_GT(blank, 100) << kernel_isa_name(isa);
+    RasterGradients skipped, walked;
+    rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, loss.wD, skipped);
+    std::fill(out.entry_blank.begin(), out.entry_blank.end(), uint8_t{0});
+    rasterize_backward(g.view(), cam, s, out, loss.wC, loss.wA, loss.wD, walked);
+    auto same_bits = [](const std::vector<float>& x, const std::vector<float>& y) {
+      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(float)) == 0;
+    };
+    EXPECT_TRUE(same_bits(skipped.means, walked.means)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.log_scales, walked.log_scales)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.quats, walked.quats)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.opacity_logits, walked.opacity_logits)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.colors, walked.colors)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.means2d, walked.means2d)) << kernel_isa_name(isa);
+    EXPECT_TRUE(same_bits(skipped.absgrad, walked.absgrad)) << kernel_isa_name(isa);
+  }
 }
 
 }  // namespace

@@ -205,6 +205,7 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   std::partial_sum(out.tile_offsets.begin(), out.tile_offsets.end(), out.tile_offsets.begin());
   out.tile_entries.resize(entries);
   out.record_of_entry.resize(entries);
+  out.entry_blank.resize(entries);  // written by the pixel loops for the entries they visit
 
   // Bands of tile rows with about equal numbers of entries.
   const int bands = std::min(threads, grid.tiles_y);

@@ -132,17 +132,24 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
     int r0, r1, h0, h1;
     box_rows_in_tile(my, sp.ry, y0, rows, r0, r1);
     box_halves_in_tile(mx, sp.rx, x0, cols, h0, h1);
-    if (h0 > h1) continue;
+    if (h0 > h1) {
+      out.entry_blank[begin + k] = 1;
+      continue;
+    }
     const RowChords chords(sp.chord, mx, x0, h0, h1);
     // Pixels that stopped at this entry, per column; summed once per entry rather than per row.
     alignas(64) int32_t finished[S] = {};
     alignas(64) int32_t row_h0[S], row_h1[S];
     chords.row_halves(my, y0, row_h0, row_h1);
+    // Whether the chord reaches no row here; stored once after the rows (a byte store may
+    // alias the pixel state, so one inside the loop would make the compiler reload it).
+    bool blank = true;
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
       const int rh0 = row_h0[r], rh1 = row_h1[r];
       if (rh0 > rh1) continue;
+      blank = false;
       evaluated += (rh1 - rh0 + 1) * kHalfTile;  // halves, whatever the path (raster.hpp)
       for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd
@@ -171,6 +178,7 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
         }
       });
     }
+    out.entry_blank[begin + k] = blank;
     for (int col = 0; col < S; ++col) remaining -= finished[col];
   }
 
@@ -258,6 +266,13 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
   for (int e = begin + max_last + 1; e < end; ++e)
     std::fill_n(entry_grads + size_t(fw.record_of_entry[e]) * kEntrySlots, kEntrySlots, 0.0f);
   for (int k = max_last; k >= 0; --k) {
+    float* record = entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots;
+    // An entry whose chord reaches no row of the tile (the forward's finding, with the same
+    // box and chord arithmetic as below) would walk no row: its sums stay +0.
+    if (fw.entry_blank[begin + k]) {
+      std::fill_n(record, kEntrySlots, 0.0f);
+      continue;
+    }
     const int32_t g = fw.tile_entries[begin + k];
     if (k >= kSplatPrefetch) __builtin_prefetch(&fw.splats[fw.tile_entries[begin + k - kSplatPrefetch]]);
     const TileSplat& sp = fw.splats[g];
@@ -274,11 +289,15 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
     const RowChords chords(sp.chord, mx, x0, h0, h1);
     alignas(64) int32_t row_h0[S], row_h1[S];
     chords.row_halves(my, y0, row_h0, row_h1);
+    // Whether any row was walked: an entry whose rows all stopped in front of it keeps its
+    // sums at +0, which its record gets without the column sums.
+    bool visited = false;
     for (int r = r0; r <= r1; ++r) {
       const float dy = my - (y0 + r + 0.5f);
       const int row = r * S;
       const int rh0 = row_h0[r], rh1 = row_h1[r];
       if (rh0 > rh1 || k > row_last[r]) continue;
+      visited = true;
       for_each_span(rh0, rh1, [&](auto width, int first) {
 #pragma omp simd
         for (int col = first; col < first + decltype(width)::value; ++col) {
@@ -325,8 +344,10 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
     }
     // Columns outside the box's halves hold +0 (not visited, or on AVX-512 visited by lanes
     // that add only ±0 to +0), and adding +0 changes no sum: they are left out.
-    sum_columns(acc, h0 * kHalfTile, (h1 + 1) * kHalfTile,
-                entry_grads + size_t(fw.record_of_entry[begin + k]) * kEntrySlots);
+    if (visited)
+      sum_columns(acc, h0 * kHalfTile, (h1 + 1) * kHalfTile, record);
+    else
+      std::fill_n(record, kEntrySlots, 0.0f);
   }
 }
 

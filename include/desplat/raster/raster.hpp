@@ -122,6 +122,10 @@ struct RasterOutput {
   std::vector<int32_t> gaussian_offsets;  // [N + 1] each Gaussian's first gradient record
   std::vector<int32_t> record_of_entry;   // [E] per tile entry, its gradient record: records
                                           // are grouped by Gaussian, each group in tile order
+  std::vector<uint8_t> entry_blank;       // [E] 1 where the Gaussian's box reaches the tile but
+                                          // its chord no pixel row there (nothing to blend or
+                                          // to differentiate); set for the entries the forward
+                                          // walked, which include every one the backward walks
   std::vector<float> final_transmittance; // [H, W]
   std::vector<int32_t> last_contributor;  // [H, W] index within the tile list, −1: none
   // The pixel-loop path rasterize_blend ran (resolved, never Auto); the backward runs the
