@@ -25,7 +25,7 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
   cam.validate();
   const size_t n = g.size();
   const size_t pixels = size_t(cam.width) * cam.height;
-  if (fw.width != cam.width || fw.height != cam.height || fw.visible.size() != n)
+  if (fw.width != cam.width || fw.height != cam.height || fw.visible.size() != n || fw.scales.size() != 3 * n)
     throw std::invalid_argument("rasterize_backward: forward output does not match the camera or Gaussians");
   auto check = [](std::span<const float> v, size_t expect, const char* name) {
     if (!v.empty() && v.size() != expect)
@@ -82,7 +82,8 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
       const int64_t i = i0 + std::min(l, lanes - 1);
       const bool used = l < lanes && fw.visible[i];
       any_visible |= used;
-      for (int k = 0; k < 3; ++k) geo.mean[k][l] = g.means[3 * i + k], geo.scale[k][l] = std::exp(g.log_scales[3 * i + k]);
+      // The forward's exp(log_scales), read rather than recomputed (the same values).
+      for (int k = 0; k < 3; ++k) geo.mean[k][l] = g.means[3 * i + k], geo.scale[k][l] = fw.scales[3 * i + k];
       for (int k = 0; k < 4; ++k) geo.quat[k][l] = g.quats[4 * i + k];
       for (int k = 0; k < 3; ++k) d_in.conic[k][l] = fw.conics[3 * i + k], d_in.d_conic[k][l] = 0.0f;
       d_in.d_mean2d[0][l] = d_in.d_mean2d[1][l] = d_in.d_depth[l] = 0.0f;

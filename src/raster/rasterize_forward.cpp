@@ -52,6 +52,8 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
       for (int k = 0; k < 4; ++k) in.quat[k][l] = g.quats[4 * i + k];
       if (l >= lanes) in.mean[2][l] = NAN;  // padding: never visible
     }
+    for (int l = 0; l < lanes; ++l)
+      for (int k = 0; k < 3; ++k) out.scales[3 * (i0 + l) + k] = in.scale[k][l];
     LaneGeometry geometry;
     geometry_lanes(lane_cam, in, geometry);
     LaneProjection proj;
@@ -254,6 +256,7 @@ void rasterize_project(const GaussianView& g, const Camera& cam, const RasterSet
   out.opacity.resize(n);
   out.color_clamped.resize(3 * n);
   out.blend_radii.resize(2 * n);
+  out.scales.resize(3 * n);
   out.splats.resize(n);  // the chord shape now, the rest when the tiles are binned
   preprocess(g, cam, s, sh_degree, out);
 }

@@ -111,6 +111,7 @@ struct RasterOutput {
   // --- saved for backward ---
   std::vector<float> rgb;                 // [N, 3] color after SH / clamp
   std::vector<float> opacity;             // [N]    sigmoid(logit)
+  std::vector<float> scales;              // [N, 3] exp(log_scales), world units
   std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
   std::vector<int32_t> blend_radii;       // [N, 2] the extent [px] in which α can reach 1/255
                                           // (≤ radii; opacity-dependent): tiles and rows visited
