@@ -1,8 +1,11 @@
 // exp(x) for x ≤ 0 in float32, written so GCC/Clang vectorize it (std::exp does not
 // vectorize without -ffast-math, which we do not use because it breaks NaN checks).
-// Cody–Waite range reduction x = n·ln2 + r, |r| ≤ ln2/2, then a degree-7 Taylor
-// polynomial: relative error ≤ 2e-7 (checked against std::exp in the tests), about
-// what gsplat's CUDA __expf gives. Inputs below −87 return 0.
+// Cody–Waite range reduction x = n·ln2 + r, |r| ≤ ln2/2, then p(r) = 1 + r·q(r) with q of
+// degree 4, the least relative error to e^r on that interval (a Remez fit with p(0) = 1,
+// so exp(0) = 1 exactly: scripts/fit_exp_polynomial.py). Relative error ≤ 1.7e-7 over every
+// float in [−87, 0], at most 2 ulps, about what gsplat's CUDA __expf gives; a degree-7
+// Taylor polynomial had 0.94 ulps at most but two more multiply-adds on the pixel loops'
+// longest dependency chain (docs/bench/issue16_speed.md). Inputs below −87 return 0.
 #pragma once
 
 #include <bit>
@@ -24,13 +27,11 @@ inline float fast_exp_nonpositive(float x) {
   // pass must get the same bits.
   const float n = madd(x, kLog2e, kRoundMagic) - kRoundMagic;
   const float r = madd(-n, kLn2Lo, madd(-n, kLn2Hi, x));
-  float p = 1.0f / 5040.0f;
-  p = madd(p, r, 1.0f / 720.0f);
-  p = madd(p, r, 1.0f / 120.0f);
-  p = madd(p, r, 1.0f / 24.0f);
-  p = madd(p, r, 1.0f / 6.0f);
-  p = madd(p, r, 0.5f);
-  p = madd(p, r, 1.0f);
+  float p = 8.290314728e-03f;
+  p = madd(p, r, 4.189792930e-02f);
+  p = madd(p, r, 1.666763619e-01f);
+  p = madd(p, r, 4.999914953e-01f);
+  p = madd(p, r, 9.999997072e-01f);
   p = madd(p, r, 1.0f);
   // Multiply by 2^n by building the float's exponent directly (n ≥ −126 here).
   const float two_n = std::bit_cast<float>(static_cast<int32_t>(n + 127.0f) << 23);
