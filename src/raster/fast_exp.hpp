@@ -3,9 +3,10 @@
 // Cody–Waite range reduction x = n·ln2 + r, |r| ≤ ln2/2, then p(r) = 1 + r·q(r) with q of
 // degree 4, the least relative error to e^r on that interval (a Remez fit with p(0) = 1,
 // so exp(0) = 1 exactly: scripts/fit_exp_polynomial.py). Relative error ≤ 1.7e-7 over every
-// float in [−87, 0], at most 2 ulps, about what gsplat's CUDA __expf gives; a degree-7
-// Taylor polynomial had 0.94 ulps at most but two more multiply-adds on the pixel loops'
-// longest dependency chain (docs/bench/issue16_speed.md). Inputs below −87 return 0.
+// float in [−87, 0], 2.01 ulps at most (CUDA's __expf, which gsplat calls, is documented at
+// 2 + ⌊|1.173·x|⌋ ulps). A degree-7 Taylor polynomial had 0.94 ulps at most but two more
+// multiply-adds on every pixel's path to α (docs/bench/issue16_speed.md). Inputs below −87
+// return 0.
 #pragma once
 
 #include <bit>
