@@ -79,6 +79,13 @@ TEST(ConfigErrors, OwnedPixelPullSettingsAreCheckedAndRead) {
   EXPECT_EQ(c.distractors.owned_after, 100);
 }
 
+TEST(ConfigErrors, OccluderColourPriorWeightIsCheckedAndRead) {
+  EXPECT_CONTAINS(error_for({{"distractors", {{"lambda_occluder_colour", -0.1}}}}),
+                  "distractors.lambda_occluder_colour must be ≥ 0");
+  EXPECT_EQ(config_from_json({{"distractors", {{"lambda_occluder_colour", 0.4}}}}).distractors.lambda_occluder_colour,
+            0.4f);
+}
+
 TEST(ConfigErrors, NonFiniteValuesAreRefusedWhateverTheSetting) {
   TrainConfig c;
   c.densify.grad_threshold = std::numeric_limits<float>::quiet_NaN();

@@ -620,12 +620,8 @@ TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
   }
 }
 
-// The owned-pixel pull in a trainer: view 0 alone shows a 24×24 square 50/255 brighter than
-// the scene, an area the static layer misses and the distractors come to explain. A partly
-// transparent distractor fits it (a white one would need α = 1); with the pull on, the
-// distractors over it end more opaque. Before `owned_after` the pull is off: training is bit
-// for bit the run without it.
-TEST(TrainerRules, TheOwnedPixelPullMakesAOneViewSquaresDistractorsOpaqueFromItsStepOn) {
+// Eight 64×48 views; view 0 alone shows a 24×24 square (x 20–43, y 12–35) 50/255 brighter.
+TrainingData views_with_a_brighter_square_in_view_0() {
   TrainingData data = test::synthetic_training_data(8, 64, 48, 5);
   ByteImage& img = data.train[0].image;
   for (int y = 12; y < 36; ++y)
@@ -634,6 +630,16 @@ TEST(TrainerRules, TheOwnedPixelPullMakesAOneViewSquaresDistractorsOpaqueFromIts
         uint8_t& v = img.pixels[(size_t(y) * 64 + x) * 3 + c];
         v = uint8_t(std::min(255, v + 50));
       }
+  return data;
+}
+
+// The owned-pixel pull in a trainer: view 0 alone shows a 24×24 square 50/255 brighter than
+// the scene, an area the static layer misses and the distractors come to explain. A partly
+// transparent distractor fits it (a white one would need α = 1); with the pull on, the
+// distractors over it end more opaque. Before `owned_after` the pull is off: training is bit
+// for bit the run without it.
+TEST(TrainerRules, TheOwnedPixelPullMakesAOneViewSquaresDistractorsOpaqueFromItsStepOn) {
+  const TrainingData data = views_with_a_brighter_square_in_view_0();
   auto run = [&](float lambda_owned, int owned_after) {
     TrainConfig c = seeding_test_config();
     c.distractors.lambda_owned = lambda_owned;
@@ -655,6 +661,46 @@ TEST(TrainerRules, TheOwnedPixelPullMakesAOneViewSquaresDistractorsOpaqueFromIts
   EXPECT_EQ(square_alpha(later), a_off);
   EXPECT_EQ(later.distractors()[0].params.means, off.distractors()[0].params.means);
   EXPECT_EQ(later.gaussians().params.means, off.gaussians().params.means);
+}
+
+// The occluder-colour prior in a trainer, on the owned pull's scene (a one-view square 50/255
+// brighter than the scene): with the prior on and the owned pull off, the distractors over the
+// square end more opaque, and their own colour (C_d / A_d) nearer the photo's, than without it.
+TEST(TrainerRules, TheOccluderColourPriorMakesAOneViewSquaresDistractorsOpaqueAndPhotoColoured) {
+  const TrainingData data = views_with_a_brighter_square_in_view_0();
+  const ByteImage& img = data.train[0].image;
+  auto run = [&](float lambda) {
+    TrainConfig c = seeding_test_config();
+    c.distractors.lambda_owned = 0.0f;
+    c.distractors.lambda_occluder_colour = lambda;
+    Trainer t(data, c);
+    for (int i = 0; i < 400; ++i) t.step();
+    return t;
+  };
+  const Trainer off = run(0.0f), on = run(1.0f);
+  struct Square { double alpha, colour_error; };
+  auto square = [&](const Trainer& t) {
+    const ViewLayers layers = t.render_layers(0, {0, 0, 0});  // distractor over black: C_d
+    Square s{0, 0};
+    int n = 0;
+    for (int y = 14; y < 34; ++y)
+      for (int x = 22; x < 42; ++x) {
+        const size_t p = size_t(y) * 64 + x;
+        const double a = layers.distractor_alpha.pixels[p];
+        s.alpha += a;
+        if (a < 0.05) continue;
+        for (int c = 0; c < 3; ++c)
+          s.colour_error += std::abs(layers.distractor.pixels[3 * p + c] / a - img.pixels[3 * p + c] / 255.0);
+        n += 3;
+      }
+    s.alpha /= 20 * 20;
+    s.colour_error /= std::max(n, 1);
+    return s;
+  };
+  const Square a_off = square(off), a_on = square(on);
+  // Training is deterministic: the margin asks for an effect of a size that matters, not noise.
+  EXPECT_GT(a_on.alpha, a_off.alpha + 0.05) << a_on.alpha << " against " << a_off.alpha;
+  EXPECT_LT(a_on.colour_error, a_off.colour_error) << a_on.colour_error << " against " << a_off.colour_error;
 }
 
 TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
@@ -763,6 +809,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.pixels_per_distractor, 0);
   EXPECT_EQ(paper.distractors.lambda_explained, 0.0f);
   EXPECT_EQ(paper.distractors.lambda_mask_tv, 0.0f);
+  EXPECT_EQ(paper.distractors.lambda_occluder_colour, 0.0f);
   EXPECT_EQ(paper.distractors.lambda_owned, 0.0f);
   EXPECT_EQ(paper.distractors.refine_every_epochs, 10);
   EXPECT_FALSE(paper.distractors.reseed_starved_views);
@@ -786,6 +833,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
+  EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.0f);  // measured, not kept: round 18
   EXPECT_TRUE(def.distractors.reseed_starved_views);
   EXPECT_TRUE(def.distractors.seed_uncovered);
   EXPECT_EQ(def.distractors.grow_after, 0);

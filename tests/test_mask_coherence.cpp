@@ -102,5 +102,80 @@ TEST(MaskTotalVariation, WrongSizesAreOneClearError) {
   EXPECT_CONTAINS(message, "mask_total_variation");
 }
 
+// Two pixels, photo I = (0.2, 0.4, 0.6) and (1, 1, 1).
+// Pixel 0: A_d = 0.5, C_d = (0.1, 0.3, 0.2) → C_d − A_d·I = (0, +0.1, −0.1), sum 0.2.
+// Pixel 1: A_d = 0.25, C_d = (0.5, 0, 0.25) → (+0.25, −0.25, 0), sum 0.5.
+// λ = 0.6: value 0.6 · 0.7 / (3 · 2) = 0.07; each nonzero term moves its colour by
+// ±λ/6 = ±0.1 and the alpha by ∓0.1·I_c.
+TEST(OccluderColourPrior, HandComputedValueAndGradient) {
+  const std::vector<float> color{0.1f, 0.3f, 0.2f, 0.5f, 0.0f, 0.25f}, alpha{0.5f, 0.25f};
+  const std::vector<float> photo{0.2f, 0.4f, 0.6f, 1.0f, 1.0f, 1.0f};
+  std::vector<float> d_color(6, 0.0f), d_alpha(2, 0.0f);
+  EXPECT_NEAR(occluder_colour_prior({color, alpha}, photo, 0.6f, d_color, d_alpha), 0.07, 1e-7);
+  const std::vector<float> expected_color{0.0f, 0.1f, -0.1f, 0.1f, -0.1f, 0.0f};
+  for (size_t i = 0; i < 6; ++i) EXPECT_NEAR(d_color[i], expected_color[i], 1e-7) << "entry " << i;
+  EXPECT_NEAR(d_alpha[0], -0.1f * 0.4f + 0.1f * 0.6f, 1e-7);
+  EXPECT_NEAR(d_alpha[1], -0.1f * 1.0f + 0.1f * 1.0f, 1e-7);
+}
+
+// Where the composite C_d + (1 − A_d)·s fits the photo, the value is (1 − A_d)·|I − s|:
+// a faint distractor of an extreme colour pays for the static layer's whole miss, an opaque
+// one of the photo's colour nothing. Checked against that closed form for several A_d.
+TEST(OccluderColourPrior, OnAFittedPixelItIsTheUnclaimedShareOfTheStaticMiss) {
+  const std::vector<float> photo{0.7f, 0.5f, 0.3f}, statics{0.4f, 0.45f, 0.35f};
+  double miss = 0;
+  for (int c = 0; c < 3; ++c) miss += std::abs(double(photo[c]) - statics[c]) / 3.0;
+  for (float a : {0.1f, 0.3f, 0.6f, 1.0f}) {
+    std::vector<float> color(3), alpha{a}, d_color(3, 0.0f), d_alpha(1, 0.0f);
+    for (int c = 0; c < 3; ++c) color[c] = photo[c] - (1.0f - a) * statics[c];  // the composite fits
+    EXPECT_NEAR(occluder_colour_prior({color, alpha}, photo, 1.0f, d_color, d_alpha), (1.0 - a) * miss, 1e-6)
+        << "A_d = " << a;
+  }
+}
+
+// Central differences in double of the value (piecewise linear; no term within the step of 0).
+TEST(OccluderColourPrior, MatchesFiniteDifferences) {
+  const size_t P = 12;
+  std::vector<float> color(3 * P), alpha(P), photo(3 * P);
+  for (size_t p = 0; p < P; ++p) {
+    alpha[p] = float(std::fmod(0.618034 * double(p * p + 1), 1.0));
+    for (int c = 0; c < 3; ++c) {
+      photo[3 * p + c] = float(std::fmod(0.414214 * double(7 * p + c + 2), 1.0));
+      color[3 * p + c] = float(std::fmod(0.732051 * double(5 * p + 3 * c + 1), 1.0)) * alpha[p];
+      // Keep every term away from its kink: the steps below move it by at most 1e-3.
+      if (std::abs(color[3 * p + c] - alpha[p] * photo[3 * p + c]) < 0.01f) color[3 * p + c] += 0.02f;
+      ASSERT_GT(std::abs(color[3 * p + c] - alpha[p] * photo[3 * p + c]), 3e-3f);
+    }
+  }
+  const std::vector<float> keep{1, 1, 0, 1, 1, 1, 1, 0, 1, 1, 1, 1};
+  const float lambda = 0.7f, h = 1e-3f;
+  std::vector<float> d_color(3 * P, 0.0f), d_alpha(P, 0.0f), sc(3 * P), sa(P);
+  occluder_colour_prior({color, alpha}, photo, lambda, d_color, d_alpha, keep);
+  auto value = [&](const std::vector<float>& c, const std::vector<float>& a) {
+    return occluder_colour_prior({c, a}, photo, lambda, sc, sa, keep);
+  };
+  for (size_t i = 0; i < 3 * P; ++i) {
+    std::vector<float> up = color, down = color;
+    up[i] += h, down[i] -= h;
+    EXPECT_NEAR(d_color[i], (value(up, alpha) - value(down, alpha)) / (double(up[i]) - double(down[i])), 1e-5)
+        << "colour " << i;
+  }
+  for (size_t p = 0; p < P; ++p) {
+    std::vector<float> up = alpha, down = alpha;
+    up[p] += h, down[p] -= h;
+    EXPECT_NEAR(d_alpha[p], (value(color, up) - value(color, down)) / (double(up[p]) - double(down[p])), 1e-5)
+        << "alpha " << p;
+  }
+  EXPECT_EQ(d_alpha[2], 0.0f);  // ignored pixels get nothing
+  EXPECT_EQ(d_color[21], 0.0f);
+}
+
+TEST(OccluderColourPrior, WrongSizesAreOneClearError) {
+  std::vector<float> color(6), alpha(2), photo(5), dc(6), da(2);
+  const auto message =
+      testing::error_of<std::invalid_argument>([&] { occluder_colour_prior({color, alpha}, photo, 1.0f, dc, da); });
+  EXPECT_CONTAINS(message, "occluder_colour_prior");
+}
+
 }  // namespace
 }  // namespace desplat

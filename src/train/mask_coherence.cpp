@@ -7,6 +7,14 @@
 
 namespace desplat {
 
+namespace {
+// The pixels a mean runs over: all of them, or the ones the user's mask keeps.
+double kept_pixels(std::span<const float> keep, size_t pixels) {
+  if (keep.empty()) return double(pixels);
+  return double(std::count_if(keep.begin(), keep.end(), [](float k) { return k > 0; }));
+}
+}  // namespace
+
 double mask_total_variation(std::span<const float> alpha, int width, int height, float lambda,
                             std::span<float> d_alpha, std::span<const float> keep) {
   const size_t pixels = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
@@ -14,12 +22,8 @@ double mask_total_variation(std::span<const float> alpha, int width, int height,
       (!keep.empty() && keep.size() != pixels))
     throw std::invalid_argument("mask_total_variation: sizes disagree");
   if (lambda == 0 || pixels == 0) return 0;
-  double kept = double(pixels);
-  if (!keep.empty()) {
-    kept = 0;
-    for (float k : keep) kept += k > 0;
-    if (kept == 0) return 0;
-  }
+  const double kept = kept_pixels(keep, pixels);
+  if (kept == 0) return 0;
   const float g = lambda / float(kept);
   // Each pair of neighbours (p, q) adds sign(α_p − α_q)·g to p's gradient and subtracts it
   // from q's, unless the user's mask drops either pixel.
@@ -50,6 +54,36 @@ double mask_total_variation(std::span<const float> alpha, int width, int height,
       if (y + 1 < height && counted(p, p + w)) sum += std::abs(double(alpha[p] - alpha[p + w]));
     }
   return double(lambda) * sum / kept;
+}
+
+double occluder_colour_prior(Layer d, std::span<const float> target, float lambda, std::span<float> d_color,
+                             std::span<float> d_alpha, std::span<const float> keep) {
+  const size_t pixels = d.alpha.size();
+  if (d.color.size() != 3 * pixels || target.size() != 3 * pixels || d_color.size() != 3 * pixels ||
+      d_alpha.size() != pixels || (!keep.empty() && keep.size() != pixels))
+    throw std::invalid_argument("occluder_colour_prior: sizes disagree");
+  if (lambda == 0 || pixels == 0) return 0;
+  const double kept = kept_pixels(keep, pixels);
+  if (kept == 0) return 0;
+  const float g = lambda / (3.0f * float(kept));
+  auto kept_at = [&](size_t p) { return keep.empty() || keep[p] > 0; };
+#pragma omp parallel for schedule(static)
+  for (size_t p = 0; p < pixels; ++p) {
+    if (!kept_at(p)) continue;
+    float da = 0;
+    for (int c = 0; c < 3; ++c) {
+      const float diff = d.color[3 * p + c] - d.alpha[p] * target[3 * p + c];
+      const float sign = diff > 0 ? g : diff < 0 ? -g : 0.0f;
+      d_color[3 * p + c] += sign;
+      da -= sign * target[3 * p + c];
+    }
+    d_alpha[p] += da;
+  }
+  double sum = 0;  // the reported value, in pixel order
+  for (size_t p = 0; p < pixels; ++p)
+    if (kept_at(p))
+      for (int c = 0; c < 3; ++c) sum += std::abs(double(d.color[3 * p + c]) - double(d.alpha[p]) * target[3 * p + c]);
+  return double(lambda) * sum / (3.0 * kept);
 }
 
 }  // namespace desplat

@@ -41,6 +41,7 @@ TrainConfig preset_config(std::string_view name) {
     c.distractors.lambda_owned = 0.0f;
     c.distractors.refine_every_epochs = 10;
     c.distractors.lambda_mask_tv = 0.0f;
+    c.distractors.lambda_occluder_colour = 0.0f;
     c.distractors.pixels_per_distractor = 0;
     c.distractors.size_threshold_at_scene_depth = false;  // the default too, stated for the record
     c.distractors.reseed_starved_views = false;

@@ -92,6 +92,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"distractors.lambda_static", &c.distractors.lambda_static},
       {"distractors.lambda_distractor", &c.distractors.lambda_distractor},
       {"distractors.lambda_mask_tv", &c.distractors.lambda_mask_tv},
+      {"distractors.lambda_occluder_colour", &c.distractors.lambda_occluder_colour},
       {"distractors.explained_tolerance", &c.distractors.explained_tolerance},
       {"distractors.lambda_explained", &c.distractors.lambda_explained},
       {"distractors.lambda_owned", &c.distractors.lambda_owned},
@@ -254,6 +255,7 @@ void validate_config(const TrainConfig& c) {
   require("distractors.lambda_static", c.distractors.lambda_static, 0, kBig, false, "≥ 0");
   require("distractors.lambda_distractor", c.distractors.lambda_distractor, 0, kBig, false, "≥ 0");
   require("distractors.lambda_mask_tv", c.distractors.lambda_mask_tv, 0, kBig, false, "≥ 0");
+  require("distractors.lambda_occluder_colour", c.distractors.lambda_occluder_colour, 0, kBig, false, "≥ 0");
   require("distractors.explained_tolerance", c.distractors.explained_tolerance, 0, kBig, true, "> 0");
   require("distractors.lambda_explained", c.distractors.lambda_explained, 0, kBig, false, "≥ 0");
   require("distractors.lambda_owned", c.distractors.lambda_owned, 0, kBig, false, "≥ 0");

@@ -311,6 +311,9 @@ StepStats Trainer::step() {
     if (distractors && config_.distractors.regularize && config_.distractors.lambda_mask_tv > 0)
       stats.loss += mask_total_variation(distractor.alpha, cam.width, cam.height,
                                          config_.distractors.lambda_mask_tv, distractor_pass_.d_alpha, keep);
+    if (distractors && config_.distractors.regularize && config_.distractors.lambda_occluder_colour > 0)
+      stats.loss += occluder_colour_prior(distractor, target.pixels, config_.distractors.lambda_occluder_colour,
+                                          distractor_pass_.d_color, distractor_pass_.d_alpha, keep);
     if (config_.distractors.enabled) {
       const DistractorSettings& ds = config_.distractors;
       const ViewResidual residual = measure_view_residual(
