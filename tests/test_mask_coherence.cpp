@@ -60,8 +60,8 @@ TEST(MaskTotalVariation, MatchesFiniteDifferences) {
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {  // the check needs no adjacent pair within the step
       const size_t p = size_t(y) * W + x;
-      if (x + 1 < W) ASSERT_GT(std::abs(alpha[p] - alpha[p + 1]), 2e-3f);
-      if (y + 1 < H) ASSERT_GT(std::abs(alpha[p] - alpha[p + W]), 2e-3f);
+      if (x + 1 < W) { ASSERT_GT(std::abs(alpha[p] - alpha[p + 1]), 2e-3f); }
+      if (y + 1 < H) { ASSERT_GT(std::abs(alpha[p] - alpha[p + W]), 2e-3f); }
     }
   const float lambda = 0.7f, h = 1e-3f;
   std::vector<float> grad(alpha.size(), 0.0f), scratch(alpha.size(), 0.0f);

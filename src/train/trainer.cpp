@@ -311,7 +311,9 @@ StepStats Trainer::step() {
     if (distractors && config_.distractors.regularize && config_.distractors.lambda_mask_tv > 0)
       stats.loss += mask_total_variation(distractor.alpha, cam.width, cam.height,
                                          config_.distractors.lambda_mask_tv, distractor_pass_.d_alpha, keep);
-    if (distractors && config_.distractors.regularize && config_.distractors.lambda_occluder_colour > 0)
+    // Like the owned-pixel pull, only once the static layer has had its chance (owned_after).
+    if (distractors && config_.distractors.regularize && config_.distractors.lambda_occluder_colour > 0 &&
+        step_ >= config_.distractors.owned_after)
       stats.loss += occluder_colour_prior(distractor, target.pixels, config_.distractors.lambda_occluder_colour,
                                           distractor_pass_.d_color, distractor_pass_.d_alpha, keep);
     if (config_.distractors.enabled) {

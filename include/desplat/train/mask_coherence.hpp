@@ -4,6 +4,8 @@
 // 0.1 of the clean photo). The photometric loss cannot tell who should explain such a pixel;
 // this prior gives it to the layer that explains its neighbours, so the mask fills the
 // object instead of leaving holes, and costs nothing where A_d is flat (a clean view).
+// Also the occluder-colour prior: where a distractor is, it should be opaque and show the
+// photo's colour, so a mask does not stop at the least alpha that fits.
 #pragma once
 
 #include <span>
