@@ -334,6 +334,7 @@ TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
   std::vector<float> target(48 * 3);
   for (size_t i = 0; i < target.size(); ++i) target[i] = float(i % 7) / 7.0f;
   DistractorSettings s;
+  s.pixels_per_distractor = 4;  // a footprint of √4 = 2 px: σ of one pixel (checked below)
   const GaussianSet g = reseed_distractors(cam, mask, target, 10, s, 3);
   ASSERT_EQ(g.size(), 3u);  // only three pixels to draw from
   std::vector<int> hit;
@@ -348,9 +349,17 @@ TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
     hit.push_back(p);
     for (int c = 0; c < 3; ++c) EXPECT_EQ(g.colors[3 * i + c], target[3 * p + c]);
     EXPECT_NEAR(1 / (1 + std::exp(-g.opacity_logits[i])), s.init_opacity, 1e-6);
-    // σ = ρ·½·√4 / f without a growth cap: one pixel at the plane's depth.
+    // σ = ρ·½·√A / f with A = 4: one pixel at the plane's depth.
     EXPECT_NEAR(std::exp(g.log_scales[3 * i]) * cam.fx / s.init_depth, 1.0, 1e-4);
   }
+  // A = 16 spreads each seed over √16 = 4 px: σ of two pixels; without a cap (0), √4 again.
+  s.pixels_per_distractor = 16;
+  const GaussianSet wide = reseed_distractors(cam, mask, target, 10, s, 3);
+  for (float ls : wide.log_scales) EXPECT_NEAR(std::exp(ls) * cam.fx / s.init_depth, 2.0, 1e-4);
+  s.pixels_per_distractor = 0;
+  const GaussianSet uncapped = reseed_distractors(cam, mask, target, 10, s, 3);
+  for (float ls : uncapped.log_scales) EXPECT_NEAR(std::exp(ls) * cam.fx / s.init_depth, 1.0, 1e-4);
+  s.pixels_per_distractor = 4;
   std::sort(hit.begin(), hit.end());
   EXPECT_EQ(hit, (std::vector<int>{10, 38, 40}));
   EXPECT_EQ(reseed_distractors(cam, mask, target, 2, s, 3).size(), 2u);
@@ -676,6 +685,9 @@ TEST(TrainerRules, TheOccluderColourPriorMakesAOneViewSquaresDistractorsOpaqueAn
     c.distractors.lambda_owned = 0.0f;
     c.distractors.lambda_occluder_colour = lambda;
     c.distractors.owned_after = after;
+    // The margin below was set with 4 px per distractor (the default until round 19). At 8 the
+    // 24×24 square holds half as many, and 400 steps leave the prior +0.02 of alpha, not +0.05.
+    c.distractors.pixels_per_distractor = 4;
     Trainer t(data, c);
     for (int i = 0; i < 400; ++i) t.step();
     return t;
@@ -834,7 +846,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
   EXPECT_FALSE(def.densify.stats.visible_count_from_one);
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
-  EXPECT_EQ(def.distractors.pixels_per_distractor, 4);
+  EXPECT_EQ(def.distractors.pixels_per_distractor, 8);
   EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
