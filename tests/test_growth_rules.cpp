@@ -846,7 +846,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
   EXPECT_FALSE(def.densify.stats.visible_count_from_one);
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
-  EXPECT_EQ(def.distractors.pixels_per_distractor, 8);
+  EXPECT_EQ(def.distractors.pixels_per_distractor, 6);
   EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);

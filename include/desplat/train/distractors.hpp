@@ -67,10 +67,10 @@ struct DistractorSettings {
   // Growth cap: a refinement grows a view's buffer to at most (pixels the static layer left
   // unexplained in the view's latest step, as count_connected_misses counts them, at full
   // training resolution) /
-  // pixels_per_distractor, the highest gradients first. 0: unlimited. 8, not 4: once the
-  // summed-alpha limit and the opaque-pulling rules keep distractors from stacking, half the
-  // density fits as well and halves the buffers (docs/bench/issue17_ab.md, round 19).
-  int pixels_per_distractor = 8;
+  // pixels_per_distractor, the highest gradients first. 0: unlimited. 6, not 4: once the
+  // summed-alpha limit and the opaque-pulling rules keep distractors from stacking, a third
+  // fewer fit as well on real occluders; 8 cost them 0.15 dB (docs/bench/issue17_ab.md, round 19).
+  int pixels_per_distractor = 6;
   // What the cap, the starved test and the uncovered seeding count as the static layer's
   // unexplained pixels. false: every miss. true: only misses inside a connected area (the
   // 3×3 opening of the miss mask, ViewResidual::static_unexplained_in_areas), on the idea
