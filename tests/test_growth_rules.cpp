@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 
 #include "desplat/train/density.hpp"
 #include "desplat/train/distractors.hpp"
@@ -69,6 +70,17 @@ TEST(StatisticsRules, EachStepNormalizedAtItsOwnResolution) {
   b.accumulate_statistics(s1.fw, s1.grads, authors);
   b.accumulate_statistics(s2.fw, s2.grads, authors);
   EXPECT_NEAR(b.mean_gradient(0, authors, 200), 0.15f, 1e-6f);
+}
+
+TEST(StatisticsRules, AViewScaleMultipliesThatStepsGradientOnly) {
+  // Step 1 (100 px, |g| = 0.002) judged per seen pixel with scale 2, step 2 (100 px, |g| =
+  // 0.001) with 1: (0.002·2·50 + 0.001·50) / 2 = 0.125; the visible count is not scaled.
+  TrainableGaussians a = gaussians(1, 0.01f);
+  const FakeStep s1 = fake_step(100, {1}, {0.002f}), s2 = fake_step(100, {1}, {0.001f});
+  a.accumulate_statistics(s1.fw, s1.grads, StatisticsRules{}, 2.0f);
+  a.accumulate_statistics(s2.fw, s2.grads, StatisticsRules{});
+  EXPECT_NEAR(a.mean_gradient(0, StatisticsRules{}, 100), 0.125f, 1e-6f);
+  EXPECT_EQ(a.visible_count[0], 2);
 }
 
 TEST(StatisticsRules, VisibleCountFromOneOrSplatfactosFirstStep) {
@@ -819,6 +831,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_TRUE(paper.densify.stats.visible_count_from_one);
   EXPECT_TRUE(paper.densify.stats.radius_from_eigenvalue);
   EXPECT_FALSE(paper.densify.stats.hide_behind_distractors);
+  EXPECT_FALSE(paper.densify.stats.gradient_per_seen_pixel);
   EXPECT_FALSE(paper.densify.stats.normalize_each_step);
   EXPECT_FALSE(paper.densify.split_screen_needs_grad);
   EXPECT_FALSE(paper.densify.inherit_moments);
@@ -849,6 +862,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(def.distractors.pixels_per_distractor, 6);
   EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
+  EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);    // round 20
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
   EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.4f);  // half the L1 weight 0.8: round 18
@@ -940,18 +954,72 @@ TEST(TrainerRules, HideUnseenCentersHidesCentresOnIgnoredPixelsAndBehindADistrac
   EXPECT_EQ(alpha_only.visible, (std::vector<uint8_t>{1, 0, 1, 0, 1}));
 }
 
+TEST(TrainerRules, SeenPixelGradientScaleIsKeptPixelsOverSeenPixels) {
+  // Four pixels, the last one ignored: kept 3, seen 1 + 0.5 + 0 = 1.5, so 2.
+  const std::vector<float> keep = {1, 1, 1, 0}, alpha = {0, 0.5f, 1, 0.3f};
+  EXPECT_NEAR(seen_pixel_gradient_scale(keep, alpha), 2.0f, 1e-6f);
+  // Every pixel kept: 4 / (1 + 0.5 + 0 + 0.7).
+  EXPECT_NEAR(seen_pixel_gradient_scale({}, alpha), 4.0f / 2.2f, 1e-6f);
+  // No distractor layer, a transparent one, or one that hides every kept pixel: unchanged.
+  EXPECT_EQ(seen_pixel_gradient_scale(keep, {}), 1.0f);
+  EXPECT_EQ(seen_pixel_gradient_scale(keep, std::vector<float>(4, 0.0f)), 1.0f);
+  const std::vector<float> first_two = {1, 1, 0, 0}, covering_them = {1, 1, 0.2f, 0.7f};
+  EXPECT_EQ(seen_pixel_gradient_scale(first_two, covering_them), 1.0f);
+}
+
+// `steps` steps of seeding_test_config, changed by `change`, with no static refinement within
+// the run: the densification statistics never feed back into what is trained.
+Trainer train_without_static_refinement(const TrainingData& data, const std::function<void(TrainConfig&)>& change,
+                                        int steps = 400) {
+  TrainConfig c = seeding_test_config();
+  c.densify.warmup = 10000;
+  change(c);
+  Trainer t(data, c);
+  for (int i = 0; i < steps; ++i) t.step();
+  return t;
+}
+
+TEST(TrainerRules, StaticGradientsJudgedPerSeenPixelOnlyWhereDistractorsAre) {
+  // Both runs train the same Gaussians. Judged per seen pixel, a static Gaussian's gradient sum
+  // can only grow (the scale is ≥ 1), and it grows for some: view 0's distractors cover part of
+  // its frame.
+  const TrainingData data = views_with_a_one_view_square();
+  auto run = [&](bool per_seen_pixel) {
+    return train_without_static_refinement(
+        data, [&](TrainConfig& c) { c.densify.stats.gradient_per_seen_pixel = per_seen_pixel; });
+  };
+  const Trainer off = run(false), on = run(true);
+  EXPECT_EQ(on.gaussians().params.means, off.gaussians().params.means);
+  EXPECT_EQ(on.gaussians().visible_count, off.gaussians().visible_count);
+  const std::vector<float>& sum_on = on.gaussians().absgrad_sum;
+  const std::vector<float>& sum_off = off.gaussians().absgrad_sum;
+  ASSERT_EQ(sum_on.size(), sum_off.size());
+  int64_t larger = 0;
+  for (size_t i = 0; i < sum_on.size(); ++i) {
+    EXPECT_GE(sum_on[i], sum_off[i] * (1 - 1e-6f)) << "Gaussian " << i;
+    larger += sum_on[i] > sum_off[i] * 1.001f ? 1 : 0;
+  }
+  EXPECT_GT(larger, 0);
+  // Without distractors the rule changes nothing: a static-only run's statistics are the same.
+  auto static_only = [&](bool per_seen_pixel) {
+    const Trainer t = train_without_static_refinement(
+        data,
+        [&](TrainConfig& c) {
+          c.distractors.enabled = false;
+          c.densify.stats.gradient_per_seen_pixel = per_seen_pixel;
+        },
+        50);
+    return t.gaussians().absgrad_sum;
+  };
+  EXPECT_EQ(static_only(true), static_only(false));
+}
+
 TEST(TrainerRules, StaticGaussiansBehindADistractorMaskAreNotCountedAsSeen) {
-  // No refinement within the run, so the statistics never feed back: both runs train the same
-  // Gaussians, and with the switch on a static Gaussian counts a step only when its centre is
-  // not behind view 0's distractors over the square.
+  // Both runs train the same Gaussians, and with the switch on a static Gaussian counts a step
+  // only when its centre is not behind view 0's distractors over the square.
   const TrainingData data = views_with_a_one_view_square();
   auto run = [&](bool hide) {
-    TrainConfig c = seeding_test_config();
-    c.densify.warmup = 10000;
-    c.densify.stats.hide_behind_distractors = hide;
-    Trainer t(data, c);
-    for (int i = 0; i < 400; ++i) t.step();
-    return t;
+    return train_without_static_refinement(data, [&](TrainConfig& c) { c.densify.stats.hide_behind_distractors = hide; });
   };
   const Trainer off = run(false), on = run(true);
   EXPECT_EQ(on.gaussians().params.means, off.gaussians().params.means);

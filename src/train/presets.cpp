@@ -33,6 +33,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stats.visible_count_from_one = true;
     c.densify.stats.radius_from_eigenvalue = true;
     c.densify.stats.hide_behind_distractors = false;
+    c.densify.stats.gradient_per_seen_pixel = false;
     c.densify.split_screen_needs_grad = false;
     c.densify.inherit_moments = false;
     c.densify.camera_path.radius = 0.0f;  // no camera-path cull

@@ -70,6 +70,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.visible_count_from_one", &c.densify.stats.visible_count_from_one},
       {"densify.radius_from_eigenvalue", &c.densify.stats.radius_from_eigenvalue},
       {"densify.hide_behind_distractors", &c.densify.stats.hide_behind_distractors},
+      {"densify.gradient_per_seen_pixel", &c.densify.stats.gradient_per_seen_pixel},
       {"densify.split_screen_needs_grad", &c.densify.split_screen_needs_grad},
       {"densify.inherit_moments", &c.densify.inherit_moments},
       {"densify.camera_path_radius", &c.densify.camera_path.radius},

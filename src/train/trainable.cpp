@@ -90,7 +90,7 @@ float screen_radius_px(const RasterOutput& fw, size_t i, bool from_eigenvalue) {
 }  // namespace
 
 void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const RasterGradients& grads,
-                                               const StatisticsRules& rules) {
+                                               const StatisticsRules& rules, float view_scale) {
   const int image_size = std::max(fw.width, fw.height);
   const float inv_size = 1.0f / float(image_size);
   const float grad_scale = rules.normalize_each_step ? 0.5f * float(image_size) : 1.0f;
@@ -105,7 +105,7 @@ void TrainableGaussians::accumulate_statistics(const RasterOutput& fw, const Ras
   for (int64_t i = 0; i < n; ++i) {
     if (first && rules.visible_count_from_one) visible_count[i] += 1;
     if (!fw.visible[i] && !(first && !rules.visible_count_from_one)) continue;
-    absgrad_sum[i] += grads.absgrad[i] * grad_scale;
+    absgrad_sum[i] += grads.absgrad[i] * view_scale * grad_scale;
     visible_count[i] += 1;
     if (!fw.visible[i]) continue;
     const float r = screen_radius_px(fw, i, rules.radius_from_eigenvalue) * inv_size;

@@ -378,7 +378,12 @@ StepStats Trainer::step() {
     // Behind this view's distractor mask a static Gaussian is not seen (hide_behind_distractors).
     const bool hide_behind = distractors && config_.densify.stats.hide_behind_distractors;
     hide_unseen_centers(static_pass_.forward, keep, hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
-    if (step_ < config_.densify.stop_split_at) gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats);
+    // Judged per pixel the static layer is seen on (gradient_per_seen_pixel).
+    const float seen_scale = distractors && config_.densify.stats.gradient_per_seen_pixel
+                                 ? seen_pixel_gradient_scale(keep, distractor_pass_.forward.alpha)
+                                 : 1.0f;
+    if (step_ < config_.densify.stop_split_at)
+      gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats, seen_scale);
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                     static_cast<int>(data_.train.size()), rng_);
@@ -487,6 +492,17 @@ void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::spa
     if ((!keep.empty() && keep[p] == 0) || (!hiding_alpha.empty() && hiding_alpha[p] > kDistractorMaskThreshold))
       fw.visible[i] = 0;
   }
+}
+
+float seen_pixel_gradient_scale(std::span<const float> keep, std::span<const float> distractor_alpha) {
+  if (distractor_alpha.empty()) return 1.0f;
+  double kept = 0, seen = 0;
+  for (size_t p = 0; p < distractor_alpha.size(); ++p) {
+    const double k = keep.empty() ? 1.0 : double(keep[p]);
+    kept += k;
+    seen += k * (1.0 - double(distractor_alpha[p]));
+  }
+  return seen > 0 ? float(kept / seen) : 1.0f;
 }
 
 bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period) {

@@ -36,6 +36,13 @@ struct StatisticsRules {
   // view it projects into counts. Measured and not kept (docs/bench/issue17_ab.md, round 8):
   // +0.40 dB on clutter_tracks_100 at 500×375, −0.17 to −0.22 dB on three occluded fox scenes.
   bool hide_behind_distractors = false;
+  // true: a static Gaussian's gradient from a step whose view has distractors is scaled by
+  // kept pixels / Σ kept·(1 − A_d) (seen_pixel_gradient_scale): the loss is a mean over every
+  // pixel, but under a distractor the static layer gets almost no gradient, so the same
+  // residual on what the view still shows would read smaller than on a clean view. A user
+  // mask's loss is a mean over the kept pixels only; this judges a learned mask the same way.
+  // Measured: docs/bench/issue17_ab.md, round 20. false (authors): the gradient as it is.
+  bool gradient_per_seen_pixel = true;
 };
 
 // Adam hyper-parameters (docs/METHOD.md §6).
@@ -83,9 +90,10 @@ struct TrainableGaussians {
   // Row `dst` takes row `src`'s Adam moments (a densified copy continuing its parent's).
   void copy_moments(size_t dst, size_t src);
   void reset_statistics();
-  // Records one step's statistics from the rasterizer's outputs for this view.
+  // Records one step's statistics from the rasterizer's outputs for this view; each
+  // gradient is multiplied by `view_scale` (seen_pixel_gradient_scale, or 1).
   void accumulate_statistics(const RasterOutput& forward, const RasterGradients& grads,
-                             const StatisticsRules& rules = {});
+                             const StatisticsRules& rules = {}, float view_scale = 1.0f);
   // Gaussian i's mean gradient since the last reset in the units of the densification
   // threshold; `image_size` = max(W, H) of the refinement step's image (used when the
   // rules normalize at the refinement). 0 when it was never counted.

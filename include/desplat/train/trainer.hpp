@@ -365,6 +365,12 @@ bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period);
 // not dilute its mean gradient. `keep` and `hiding_alpha` are [H·W] of fw's image, or empty.
 void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::span<const float> hiding_alpha);
 
+// The factor densify.gradient_per_seen_pixel puts on a static step's gradient statistic: the
+// kept pixels over the pixels the static layer is seen on, Σ k / Σ k·(1 − A_d), with k the
+// keep weights (empty: every pixel kept) and A_d the view's distractor alpha, both [H·W] of
+// the step's image. 1 without distractors (empty alpha) or where no kept pixel is seen at all.
+float seen_pixel_gradient_scale(std::span<const float> keep, std::span<const float> distractor_alpha);
+
 // The camera of an image at 1/factor resolution (sizes rounded down, as downscale_bytes).
 Camera downscale_camera(const Camera& c, int factor);
 // Trainer::best_training_look judges the looks on a copy of the view halved until its longer
