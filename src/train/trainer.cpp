@@ -378,12 +378,13 @@ StepStats Trainer::step() {
     // Behind this view's distractor mask a static Gaussian is not seen (hide_behind_distractors).
     const bool hide_behind = distractors && config_.densify.stats.hide_behind_distractors;
     hide_unseen_centers(static_pass_.forward, keep, hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
-    // Judged per pixel the static layer is seen on (gradient_per_seen_pixel).
-    const float seen_scale = distractors && config_.densify.stats.gradient_per_seen_pixel
-                                 ? seen_pixel_gradient_scale(keep, distractor_pass_.forward.alpha)
-                                 : 1.0f;
-    if (step_ < config_.densify.stop_split_at)
+    if (step_ < config_.densify.stop_split_at) {
+      // Judged per pixel the static layer is seen on (gradient_per_seen_pixel).
+      const float seen_scale = distractors && config_.densify.stats.gradient_per_seen_pixel
+                                   ? seen_pixel_gradient_scale(keep, distractor_pass_.forward.alpha)
+                                   : 1.0f;
       gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats, seen_scale);
+    }
     stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
     stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
                                     static_cast<int>(data_.train.size()), rng_);
