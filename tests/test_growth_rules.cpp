@@ -851,6 +851,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.max_alpha_sum, 0.0f);     // no opacity limit on copies
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
   EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
+  EXPECT_EQ(paper.appearance.lr_image, 1e-3f);     // the appendix's rate
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
   EXPECT_EQ(paper.background.lambda_alpha, 0.15f);
   EXPECT_EQ(paper.background.hidden_width, 128);
@@ -863,6 +864,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);    // round 20
+  EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);  // issue15_effects.md, the embeddings' rate
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
   EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.4f);  // half the L1 weight 0.8: round 18
