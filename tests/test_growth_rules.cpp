@@ -855,6 +855,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
   EXPECT_EQ(paper.background.lambda_alpha, 0.15f);
   EXPECT_EQ(paper.background.hidden_width, 128);
+  EXPECT_EQ(paper.background.lr_image, 1e-3f);
   // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
   const TrainConfig def = preset_config("default");
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
@@ -865,6 +866,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
   EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);    // round 20
   EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);  // issue15_effects.md, the embeddings' rate
+  EXPECT_EQ(def.background.lr_image, def.appearance.lr_image);  // an own copy trains as the shared one
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
   EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.4f);  // half the L1 weight 0.8: round 18

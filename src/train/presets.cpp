@@ -55,6 +55,7 @@ TrainConfig preset_config(std::string_view name) {
     c.transient_points.action = TransientPointAction::keep;
     c.appearance.hidden_width = 128;  // the paper's appendix (WildGaussians' MLP)
     c.appearance.lr_image = 1e-3f;    // the appendix's rate for the image embeddings
+    c.background.lr_image = 1e-3f;
     c.appearance.test_start_from_best_look = false;  // the test-time fit from the mean look, as before
     c.background.lambda_opaque = 0.0f;  // the authors' L_bg alone (docs/METHOD.md §11)
     return c;

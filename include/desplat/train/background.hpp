@@ -33,7 +33,11 @@ struct BackgroundSettings {
   int sh_degree_interval = 500;  // one band more every this many steps (half the static layer's)
   // Adam rates (the authors'): the hidden layers and the band-0 outputs; bands ≥ 1 at 1/20 of
   // that, so the sky's mean colour settles before its variation with direction.
-  float lr_mlp = 2e-3f, lr_rest = 1e-4f, lr_image = 1e-3f;
+  float lr_mlp = 2e-3f, lr_rest = 1e-4f;
+  // Our own embeddings' rate (unused while shared, below): the appearance embeddings' (1e-2,
+  // AppearanceSettings::lr_image gives the reason), so that an own copy trains as the shared one
+  // does; the authors' 1e-3 with --preset paper.
+  float lr_image = 1e-2f;
   // L_bg (background_alpha_loss): λ_bg, and which pixels the background already explains.
   float lambda_alpha = 0.15f;
   // … and λ_o, the weight that keeps the layers opaque where it does not (a learned background
