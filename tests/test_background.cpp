@@ -15,6 +15,7 @@
 #include "desplat/train/background.hpp"
 #include "desplat/train/loss.hpp"
 #include "desplat/train/training_checkpoint.hpp"
+#include "desplat/train/transient_probe.hpp"
 #include "support/expect.hpp"
 #include "support/synthetic_views.hpp"
 
@@ -399,6 +400,46 @@ TEST(Background, TheSharedEmbeddingTrainsAsTheBackgroundsOwnCopyWould) {
   narrow.background.image_dim = 8;
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { Trainer t(data, narrow); }),
                   "background.image_dim (8) must equal appearance.image_dim (32)");
+}
+
+// --effects auto's probe judges each training view in the look it was trained with. With the
+// shared embedding that is the appearance embedding for the sky too; the background's own copy
+// is never trained, and a sky drawn from it is not the view's (the probe once read it).
+TEST(Background, TheTransientProbeRendersAViewInItsTrainedLook) {
+  const TrainingData data = sky_views(24);
+  TrainConfig cfg = short_schedule(150);
+  cfg.distractors.enabled = false;
+  cfg.background.enabled = cfg.appearance.enabled = true;
+  cfg.background.hidden_width = cfg.appearance.hidden_width = 16;
+  Trainer t(data, cfg);
+  ASSERT_TRUE(t.shared_embedding());
+  for (int i = 0; i < 150; ++i) t.step();
+  double stale_gap = 0;
+  for (size_t v = 0; v < data.train.size(); v += 5) {
+    const ProbeView pv = probe_view(t, v, 1);
+    const auto e = t.appearance().embedding(v);
+    ViewLook own;  // the view's look, stated here: its embedding for the scene and the sky alike
+    own.appearance.assign(e.begin(), e.end());
+    own.background = own.appearance;
+    ViewLook stale = own;
+    const auto b = t.background().embedding(v);
+    stale.background.assign(b.begin(), b.end());
+    const ByteImage& photo = data.train[v].image;
+    const FloatImage want = t.render(data.train[v].camera, cfg.eval_background, own);
+    const FloatImage wrong = t.render(data.train[v].camera, cfg.eval_background, stale);
+    ASSERT_EQ(pv.error.size(), size_t(photo.width) * photo.height);
+    for (size_t p = 0; p < pv.error.size(); ++p) {
+      float sum = 0, stale_sum = 0;
+      for (int c = 0; c < 3; ++c) {
+        sum += std::fabs(want.pixels[3 * p + c] - byte_to_float(photo.pixels[3 * p + c]));
+        stale_sum += std::fabs(wrong.pixels[3 * p + c] - byte_to_float(photo.pixels[3 * p + c]));
+      }
+      ASSERT_FLOAT_EQ(pv.error[p], sum / 3) << "view " << v << ", pixel " << p;
+      stale_gap = std::max(stale_gap, double(std::fabs(stale_sum - sum) / 3));
+    }
+  }
+  // The two looks differ on these photos, so the comparison above tells them apart.
+  EXPECT_GT(stale_gap, 0.01);
 }
 
 }  // namespace

@@ -126,6 +126,35 @@ int probe_factor(int width, int height, const TransientRules& rules) {
   return factor;
 }
 
+ProbeView probe_view(const Trainer& probe, size_t v, int factor) {
+  const TrainView& tv = probe.data().train.at(v);
+  ProbeView pv;
+  pv.camera = downscale_camera(tv.camera, factor);
+  const int w = pv.camera.width, h = pv.camera.height;
+  // The view's own look as it was trained: with a shared embedding the sky reads the appearance
+  // embedding, not the background's own (unused) one.
+  const FloatImage render = probe.render(pv.camera, probe.config().eval_background, probe.training_look(v));
+  const ByteImage photo = downscale_bytes(tv.image, factor);
+  const std::vector<uint8_t> keep =
+      tv.keep.empty() ? std::vector<uint8_t>{} : downscale_keep(tv.keep, tv.camera.width, tv.camera.height, factor);
+  pv.error.assign(size_t(w) * h, 0.0f);
+  for (size_t p = 0; p < pv.error.size(); ++p) {
+    if (!keep.empty() && !keep[p]) {
+      pv.error[p] = -1;
+      continue;
+    }
+    float sum = 0;
+    for (int c = 0; c < 3; ++c) sum += std::fabs(render.pixels[3 * p + c] - byte_to_float(photo.pixels[3 * p + c]));
+    pv.error[p] = sum / 3;
+  }
+  RasterOutput fw;
+  rasterize_forward(probe.gaussians().params.view(), pv.camera, probe.raster_settings(), fw);
+  pv.depth.assign(size_t(w) * h, 0.0f);
+  for (size_t p = 0; p < pv.depth.size(); ++p)
+    if (fw.alpha[p] >= 0.5f) pv.depth[p] = fw.depth[p] / fw.alpha[p];
+  return pv;
+}
+
 std::optional<TransientEvidence> probe_transients(const TrainingData& data, TrainConfig config,
                                                   const TransientRules& rules, const std::atomic<bool>* stop) {
   if (rules.probe_steps < 1) throw std::invalid_argument("probe_transients: probe_steps must be at least 1");
@@ -146,41 +175,7 @@ std::optional<TransientEvidence> probe_transients(const TrainingData& data, Trai
 
   const int factor = 1 << downscales;
   std::vector<ProbeView> views(data.train.size());
-  RasterSettings rs = probe.raster_settings();
-  RasterOutput fw;
-  for (size_t v = 0; v < data.train.size(); ++v) {
-    const TrainView& tv = data.train[v];
-    ProbeView& pv = views[v];
-    pv.camera = downscale_camera(tv.camera, factor);
-    const int w = pv.camera.width, h = pv.camera.height;
-    ViewLook look;  // the view's own appearance and background, as it was trained
-    if (config.appearance.enabled) {
-      const auto e = probe.appearance().embedding(v);
-      look.appearance.assign(e.begin(), e.end());
-    }
-    if (config.background.enabled) {
-      const auto e = probe.background().embedding(v);
-      look.background.assign(e.begin(), e.end());
-    }
-    const FloatImage render = probe.render(pv.camera, config.eval_background, look);
-    const ByteImage photo = downscale_bytes(tv.image, factor);
-    const std::vector<uint8_t> keep =
-        tv.keep.empty() ? std::vector<uint8_t>{} : downscale_keep(tv.keep, tv.camera.width, tv.camera.height, factor);
-    pv.error.assign(size_t(w) * h, 0.0f);
-    for (size_t p = 0; p < pv.error.size(); ++p) {
-      if (!keep.empty() && !keep[p]) {
-        pv.error[p] = -1;
-        continue;
-      }
-      float sum = 0;
-      for (int c = 0; c < 3; ++c) sum += std::fabs(render.pixels[3 * p + c] - byte_to_float(photo.pixels[3 * p + c]));
-      pv.error[p] = sum / 3;
-    }
-    rasterize_forward(probe.gaussians().params.view(), pv.camera, rs, fw);
-    pv.depth.assign(size_t(w) * h, 0.0f);
-    for (size_t p = 0; p < pv.depth.size(); ++p)
-      if (fw.alpha[p] >= 0.5f) pv.depth[p] = fw.depth[p] / fw.alpha[p];
-  }
+  for (size_t v = 0; v < data.train.size(); ++v) views[v] = probe_view(probe, v, factor);
   return judge_transients(views, rules);
 }
 

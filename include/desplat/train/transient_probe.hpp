@@ -71,6 +71,10 @@ TransientEvidence judge_transients(const std::vector<ProbeView>& views, const Tr
 // The probe's resolution factor for views of this size (rules above).
 int probe_factor(int width, int height, const TransientRules& rules = {});
 
+// Training view v of a trained probe at 1/factor resolution: its error against the photo,
+// rendered in the view's own trained look (Trainer::training_look), and its depth.
+ProbeView probe_view(const Trainer& probe, size_t v, int factor);
+
 // Trains the probe on `data` with `config` (distractors turned off, rules.probe_steps steps, all at
 // 1/probe_factor resolution), renders every training view in its own look, and judges them.
 // Returns nullopt, having trained less, as soon as `stop` (when given) is set: a Ctrl-C.
