@@ -1,7 +1,8 @@
 // The camera-path cull's cost (train/free_space.hpp): on_camera_path over N Gaussian centres
 // for a capture of V photos on a circle of radius 1 around a scene in the unit ball (the
 // normalized frame, docs/METHOD.md §1), as each static refinement (every 100 steps) runs it.
-// Compare with bench_adam's BM_AdamUpdate, which every step runs over the same N.
+// Compare with bench_adam's BM_AdamUpdate, which every step runs over the same N. The last
+// argument turns the blind-gap rule on (1, the default) or off (0, the tube alone).
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
@@ -33,17 +34,21 @@ void BM_CameraPathCull(benchmark::State& state) {
   }
   std::vector<std::array<float, 3>> points(2000);
   for (auto& p : points) p = {0.5f * u(rng), 0.5f * u(rng), 0.5f * u(rng)};
-  const CameraPath path = camera_path(cams, points, CameraPathSettings{});
+  CameraPathSettings settings;
+  if (state.range(3) == 0) settings.blind_gap = 0;
+  const CameraPath path = camera_path(cams, points, settings);
   std::vector<float> means(3 * n);
   for (float& x : means) x = u(rng);
   for (auto _ : state) benchmark::DoNotOptimize(on_camera_path(path, means));
   state.counters["segments"] = double(path.from.size());
 }
 BENCHMARK(BM_CameraPathCull)
-    ->Args({72000, 43, 1})
-    ->Args({72000, 43, 2})
-    ->Args({72000, 300, 1})
-    ->ArgNames({"gaussians", "views", "threads"})
+    ->Args({72000, 43, 1, 1})
+    ->Args({72000, 43, 1, 0})
+    ->Args({72000, 43, 2, 1})
+    ->Args({72000, 300, 1, 1})
+    ->Args({72000, 300, 1, 0})
+    ->ArgNames({"gaussians", "views", "threads", "blind_gap"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -87,6 +87,7 @@ TEST(FreeSpace, PathKeepsShortStepsBetweenConsecutiveCamerasOnly) {
   const std::vector<Camera> cams{camera_at(0, 0, 0), camera_at(4, 0, 0), camera_at(30, 0, 0), camera_at(33, 0, 0)};
   CameraPathSettings s;
   s.by_extent = false;  // the centre rule
+  s.blind_gap = 0;      // the tube alone
   s.radius = 0.05f, s.max_segment = 0.5f;
   const CameraPath path = camera_path(cams, points, s);
   EXPECT_NEAR(path.median_depth, 10.0, 1e-9);
@@ -100,7 +101,7 @@ TEST(FreeSpace, PathKeepsShortStepsBetweenConsecutiveCamerasOnly) {
   const std::vector<uint8_t> on = on_camera_path(path, means);
   EXPECT_EQ(on, (std::vector<uint8_t>{1, 0, 0, 1, 1}));  // (4.3, 0.3): √(0.09 + 0.09) ≈ 0.42 from (4, 0, 0)
 
-  s.radius = 0;  // off
+  s.radius = 0;  // both rules off
   EXPECT_TRUE(camera_path(cams, points, s).empty());
   EXPECT_EQ(on_camera_path(camera_path(cams, points, s), means), std::vector<uint8_t>(5, 0));
   s.radius = 0.05f;
@@ -112,6 +113,7 @@ TEST(FreeSpace, CullMaskMatchesBruteForceOverEverySegment) {
   std::uniform_real_distribution<float> u(-1, 1);
   CameraPathSettings s;
   s.by_extent = false;  // the centre rule
+  s.blind_gap = 0;      // the tube alone
   s.radius = 0.08f;
   const CameraPath path = spiral_path(20, s, rng);
   ASSERT_FALSE(path.empty());
@@ -149,6 +151,7 @@ TEST(FreeSpace, ExtentMaskMatchesBruteForceOverEverySegment) {
   CameraPathSettings s;
   s.radius = 0.05f;
   s.by_extent = true;
+  s.blind_gap = 0;  // the tube alone
   const CameraPath path = spiral_path(12, s, rng);
   ASSERT_FALSE(path.empty());
   ASSERT_TRUE(path.by_extent);
@@ -160,7 +163,9 @@ TEST(FreeSpace, ExtentMaskMatchesBruteForceOverEverySegment) {
     quats.insert(quats.end(), {u(rng), u(rng), u(rng), u(rng)});
   }
   const std::vector<uint8_t> on = on_camera_path(path, means, log_scales, quats);
-  const std::vector<uint8_t> by_centre = on_camera_path(CameraPath{path.from, path.to, path.radius, false}, means);
+  CameraPath centre_rule = path;
+  centre_rule.by_extent = false;
+  const std::vector<uint8_t> by_centre = on_camera_path(centre_rule, means);
   int hits = 0, beyond_centre_rule = 0;
   for (size_t i = 0; i < on.size(); ++i) {
     Eigen::Quaterniond q(quats[4 * i], quats[4 * i + 1], quats[4 * i + 2], quats[4 * i + 3]);
@@ -204,6 +209,7 @@ TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
     cfg.densify.refine_every = 10;
     cfg.densify.stop_split_at = 0;  // … that cull only: the count moves by culls alone
     cfg.densify.camera_path.by_extent = by_extent;
+    cfg.densify.camera_path.blind_gap = 0;  // the tube alone: the needle would be in a blind gap
     Trainer t(data, cfg);
     const CameraPath& path = t.camera_path();
     ASSERT_FALSE(path.empty());
@@ -254,6 +260,136 @@ TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
   }
 }
 
+// Two cameras 2 apart along x, both looking along +z, each seeing |x − its x| < z / 2: in front
+// of the segment between them lies a triangle neither sees, reaching to depth 2.
+TEST(FreeSpace, BlindGapByHand) {
+  const Camera a = camera_at(0, 0, 0), b = camera_at(2, 0, 0);  // 16 px, fx 16: tan(half fov) = 1/2
+  const double gap = 0.5;                                          // within 1 of the segment
+  EXPECT_TRUE(in_blind_gap({1, 0, 0.5}, a, b, gap));               // between them, 0.5 ahead
+  EXPECT_TRUE(in_blind_gap({1, 0.9, 0.3}, a, b, gap));             // above that: √0.9 ≈ 0.95 from it
+  EXPECT_FALSE(in_blind_gap({1, 0, 1.5}, a, b, gap));              // unseen, but 1.5 from the segment
+  EXPECT_FALSE(in_blind_gap({1, 0, -0.5}, a, b, gap));             // behind the pair
+  EXPECT_FALSE(in_blind_gap({0.2, 0, 0.8}, a, b, gap));            // a sees it (x/z = 1/4)
+  EXPECT_FALSE(in_blind_gap({1.7, 0, 0.8}, a, b, gap));            // b sees it ((x − 2)/z = −3/8)
+  EXPECT_FALSE(in_blind_gap({1, 0, 0.5}, a, b, 0.2));              // 0.5 from a segment of 2: beyond 0.2 × 2
+  EXPECT_TRUE(in_blind_gap({-0.5, 0, 0.3}, a, b, gap));            // past a's side, unseen: 0.58 from a
+  EXPECT_FALSE(in_blind_gap({-1.5, 0, 0.1}, a, b, gap));           // 1.5 from a
+}
+
+// With both rules on, each Gaussian's verdict against an independent brute force: the closest
+// of 2,001 samples along each segment, and projection through K [R | t] with Eigen.
+TEST(FreeSpace, TubeAndBlindGapVerdictsMatchBruteForce) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<Camera> cams;
+  for (int i = 0; i < 8; ++i) {  // a ring of inward-looking cameras at radius 2 about (0, 0, 4)
+    const double angle = 0.3 * i, x = 2 * std::sin(angle), z = 4 - 2 * std::cos(angle);
+    Eigen::Matrix3d R_wc;  // columns: the camera's x, y, z axes in the world
+    const Eigen::Vector3d forward = Eigen::Vector3d(-x, 0, 4 - z).normalized(), down(0, 1, 0);
+    R_wc.col(0) = down.cross(forward), R_wc.col(1) = down, R_wc.col(2) = forward;  // x = y × z
+    Camera c;
+    c.width = c.height = 16, c.fx = c.fy = 16, c.cx = c.cy = 8;
+    const Eigen::Matrix3d R_cw = R_wc.transpose();
+    const Eigen::Vector3d t = -R_cw * Eigen::Vector3d(x, 0, z);
+    for (int r = 0; r < 3; ++r) {
+      for (int k = 0; k < 3; ++k) c.R_cw[3 * r + k] = float(R_cw(r, k));
+      c.t_cw[r] = float(t[r]);
+    }
+    cams.push_back(c);
+  }
+  const std::vector<std::array<float, 3>> points{{0, 0, 4}, {0.3f, 0.2f, 4.2f}, {-0.2f, 0, 3.9f}};
+  CameraPathSettings s;
+  s.radius = 0.03f, s.blind_gap = 0.5f, s.max_segment = 0.5f, s.by_extent = false;
+  const CameraPath path = camera_path(cams, points, s);
+  ASSERT_EQ(path.from.size(), 7u);  // steps of 0.6 < 0.5 × depth 2
+  std::vector<float> means;
+  for (int i = 0; i < 4000; ++i) {
+    const Camera& c = cams[i % 7];
+    const auto o = c.center();
+    means.insert(means.end(), {o[0] + 0.5f * u(rng), o[1] + 0.4f * u(rng), o[2] + 0.5f * u(rng)});
+  }
+  const std::vector<uint8_t> verdict = on_camera_path(path, means);
+  auto seen_by = [](const Camera& c, const Eigen::Vector3d& p) {
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) R(r, k) = c.R_cw[3 * r + k];
+    const Eigen::Vector3d q = R * p + Eigen::Vector3d(c.t_cw[0], c.t_cw[1], c.t_cw[2]);
+    const double px = c.fx * q.x() / q.z() + c.cx, py = c.fy * q.y() / q.z() + c.cy;
+    return q.z() > 1e-6 && px >= 0 && py >= 0 && px < c.width && py < c.height;
+  };
+  int counts[3] = {0, 0, 0};
+  for (size_t i = 0; i < verdict.size(); ++i) {
+    const Eigen::Vector3d p(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    bool tube = false, gap = false, border = false;
+    for (size_t k = 0; k < path.from.size(); ++k) {
+      const Eigen::Vector3d a(path.from[k].data()), b(path.to[k].data());
+      double best = 1e30;
+      for (int t = 0; t <= 2000; ++t) best = std::min(best, (a + (b - a) * (t / 2000.0) - p).norm());
+      const double reach = path.blind_gap * (b - a).norm();
+      border |= std::abs(best - path.radius) < 1e-3 || std::abs(best - reach) < 1e-3;
+      tube |= best < path.radius;
+      const Eigen::Vector3d ahead = Eigen::Vector3d(path.from_camera[k].R_cw[6], path.from_camera[k].R_cw[7],
+                                                    path.from_camera[k].R_cw[8]) +
+                                    Eigen::Vector3d(path.to_camera[k].R_cw[6], path.to_camera[k].R_cw[7],
+                                                    path.to_camera[k].R_cw[8]);
+      gap |= best < reach && (p - 0.5 * (a + b)).dot(ahead) > 0 && !seen_by(path.from_camera[k], p) &&
+             !seen_by(path.to_camera[k], p);
+    }
+    if (border) continue;  // too close to a border to judge by sampling
+    const int want = tube ? kInTube : gap ? kInBlindGap : kOffPath;
+    EXPECT_EQ(int(verdict[i]), want) << "Gaussian " << i;
+    ++counts[verdict[i]];
+  }
+  EXPECT_GT(counts[kInTube], 20);
+  EXPECT_GT(counts[kInBlindGap], 20);
+  EXPECT_GT(counts[kOffPath], 1000);
+}
+
+// A floater planted in the blind gap in front of two consecutive training cameras, beyond the
+// tube's radius, goes at the first refinement with the rule on and stays with it off.
+TEST(FreeSpace, TrainerCullsAFloaterInABlindGap) {
+  const TrainingData data = test::synthetic_training_data(16, 64, 48, 5);
+  for (const float blind_gap : {0.5f, 0.0f}) {
+    SCOPED_TRACE("blind_gap " + std::to_string(blind_gap));
+    TrainConfig cfg = test::short_schedule(30);
+    cfg.distractors.enabled = false;
+    cfg.densify.warmup = 10;
+    cfg.densify.refine_every = 10;
+    cfg.densify.stop_split_at = 0;  // culls only
+    cfg.densify.camera_path.blind_gap = blind_gap;
+    Trainer t(data, cfg);
+    const CameraPath& path = t.camera_path();
+    ASSERT_FALSE(path.empty());
+    const Camera &ca = data.train[0].camera, &cb = data.train[1].camera;
+    const auto a = ca.center(), b = cb.center();
+    const Eigen::Vector3d A(a[0], a[1], a[2]), B(b[0], b[1], b[2]), mid = 0.5 * (A + B);
+    const double step = (B - A).norm();                               // 0.39
+    const Eigen::Vector3d at = mid - 0.4 * step * mid.normalized();  // 0.16 inward: cameras circle the origin
+    const std::array<float, 3> x{float(at[0]), float(at[1]), float(at[2])};
+    ASSERT_EQ(ca.pixel_of(x), -1);  // neither photo sees it …
+    ASSERT_EQ(cb.pixel_of(x), -1);
+    ASSERT_GT(0.4 * step, 1.5 * path.radius);  // … and the tube does not reach it
+    GaussianSet planted = copy_rows(t.gaussians().params, std::vector<uint8_t>(t.gaussians().size(), 0));
+    planted.resize(1);
+    for (int k = 0; k < 3; ++k) planted.means[k] = x[k], planted.log_scales[k] = std::log(0.02f);
+    planted.quats[0] = 1;
+    planted.opacity_logits[0] = 3.0f;
+    t.mutable_gaussians().append(planted);
+    auto planted_left = [&] {  // it may drift a little under training; the scene is ≥ 0.4 away
+      for (size_t i = 0; i < t.gaussians().size(); ++i) {
+        double d2 = 0;
+        for (int k = 0; k < 3; ++k) d2 += std::pow(t.gaussians().params.means[3 * i + k] - x[k], 2);
+        if (d2 < 0.02 * 0.02) return true;
+      }
+      return false;
+    };
+    ASSERT_TRUE(planted_left());
+    while (t.current_step() < 30) t.step();
+    EXPECT_EQ(planted_left(), blind_gap == 0);
+    EXPECT_EQ(t.camera_path_blind_gap_culled, blind_gap > 0 ? 1 : 0);
+  }
+}
+
 TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
   const auto error = [](const nlohmann::json& j) {
     return testing::error_of<std::invalid_argument>([&] { config_from_json(j); });
@@ -264,6 +400,11 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
                   "config: densify.camera_path_max_segment must be > 0 (got 0)");
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_radius", 0.05}}}}).densify.camera_path.radius, 0.05f);
   EXPECT_EQ(preset_config("paper").densify.camera_path.radius, 0.0f);
+  EXPECT_EQ(preset_config("paper").densify.camera_path.blind_gap, 0.0f);
+  EXPECT_EQ(preset_config("default").densify.camera_path.blind_gap, 0.5f);
+  EXPECT_EQ(config_from_json({{"densify", {{"camera_path_blind_gap", 0.25}}}}).densify.camera_path.blind_gap, 0.25f);
+  EXPECT_CONTAINS(error({{"densify", {{"camera_path_blind_gap", -1}}}}),
+                  "config: densify.camera_path_blind_gap must be ≥ 0 (0 turns the rule off) (got -1)");
   EXPECT_EQ(preset_config("default").densify.camera_path.radius, 0.08f);
   EXPECT_FALSE(preset_config("default").densify.camera_path.by_extent);
   EXPECT_TRUE(config_from_json({{"densify", {{"camera_path_by_extent", true}}}}).densify.camera_path.by_extent);

@@ -537,8 +537,10 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                 data.points.size(), (long long)trainer.transient_seeded);
   if (const CameraPath& path = trainer.camera_path(); !path.empty())
     std::printf("camera path: %zu segments between consecutive training views (%zu longer than %.2f x the median "
-                "scene depth skipped); static Gaussians within %.4f world units of it are culled\n",
-                path.from.size(), path.skipped_segments, double(config.densify.camera_path.max_segment), path.radius);
+                "scene depth skipped); static Gaussians within %.4f world units of it, or in a blind gap (within "
+                "%.2f x a step of it, in front, in neither photo) are culled\n",
+                path.from.size(), path.skipped_segments, double(config.densify.camera_path.max_segment), path.radius,
+                path.blind_gap);
   const fs::path ckpt_path = model.checkpoint_path();
   auto save = [&] { model.write_checkpoint(trainer, {{"run", run_json}}); };
   if (opt.resume) {
@@ -649,7 +651,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                             {"skipped_segments", path.skipped_segments},
                             {"median_scene_depth", path.median_depth},
                             {"radius", path.radius},
-                            {"culled_this_run", trainer.camera_path_culled}};
+                            {"blind_gap", path.blind_gap},
+                            {"culled_this_run", trainer.camera_path_culled},
+                            {"culled_in_blind_gaps_this_run", trainer.camera_path_blind_gap_culled}};
   const MaskMetrics masks = evaluate_distractor_masks(trainer, scene);
   metrics["distractor_masks"] = mask_json(masks);
   if (!sfm_summary.is_null()) metrics["sfm"] = sfm_summary;

@@ -27,11 +27,12 @@ double median_scene_depth(const std::vector<Camera>& cameras, const std::vector<
 CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std::array<float, 3>>& points,
                        const CameraPathSettings& settings) {
   CameraPath path;
-  if (!(settings.radius > 0) || cameras.size() < 2) return path;
+  if (!(settings.radius > 0 || settings.blind_gap > 0) || cameras.size() < 2) return path;
   path.median_depth = median_scene_depth(cameras, points);
   if (!(path.median_depth > 0)) return path;
-  path.radius = settings.radius * path.median_depth;
+  path.radius = std::max(0.0, settings.radius * path.median_depth);
   path.by_extent = settings.by_extent;
+  path.blind_gap = std::max(0.0f, settings.blind_gap);
   const double longest = settings.max_segment * path.median_depth;
   for (size_t i = 0; i + 1 < cameras.size(); ++i) {
     const auto a = cameras[i].center(), b = cameras[i + 1].center();
@@ -44,8 +45,24 @@ CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std
     }
     path.from.push_back(da);
     path.to.push_back(db);
+    path.from_camera.push_back(cameras[i]);
+    path.to_camera.push_back(cameras[i + 1]);
   }
   return path;
+}
+
+bool in_blind_gap(const std::array<double, 3>& p, const Camera& a, const Camera& b, double gap_fraction) {
+  const auto ca = a.center(), cb = b.center();
+  const std::array<double, 3> da{ca[0], ca[1], ca[2]}, db{cb[0], cb[1], cb[2]};
+  double length2 = 0, ahead = 0;
+  for (int k = 0; k < 3; ++k) {
+    length2 += (db[k] - da[k]) * (db[k] - da[k]);
+    // Row 2 of R_cw is the camera's viewing direction in the world frame.
+    ahead += (p[k] - 0.5 * (da[k] + db[k])) * (double(a.R_cw[6 + k]) + double(b.R_cw[6 + k]));
+  }
+  if (!(ahead > 0) || distance_to_segment(p, da, db) > gap_fraction * std::sqrt(length2)) return false;
+  const std::array<float, 3> x{float(p[0]), float(p[1]), float(p[2])};
+  return a.pixel_of(x) < 0 && b.pixel_of(x) < 0;
 }
 
 double distance_to_segment(const std::array<double, 3>& p, const std::array<double, 3>& a,
@@ -105,6 +122,16 @@ std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<fl
       boxes[s][k] = std::min(path.from[s][k], path.to[s][k]);
       boxes[s][3 + k] = std::max(path.from[s][k], path.to[s][k]);
     }
+  // The blind-gap rule reaches blind_gap × the segment's length from it.
+  std::vector<double> gap_reach(path.from.size(), 0.0);
+  const bool gaps = path.blind_gap > 0 && path.from_camera.size() == path.from.size() &&
+                    path.to_camera.size() == path.from.size();
+  if (gaps)
+    for (size_t s = 0; s < gap_reach.size(); ++s) {
+      double length2 = 0;
+      for (int k = 0; k < 3; ++k) length2 += (path.to[s][k] - path.from[s][k]) * (path.to[s][k] - path.from[s][k]);
+      gap_reach[s] = path.blind_gap * std::sqrt(length2);
+    }
 #pragma omp parallel for schedule(static)
   for (long long i = 0; i < (long long)n; ++i) {
     const std::array<double, 3> p{means[3 * i], means[3 * i + 1], means[3 * i + 2]};
@@ -113,19 +140,23 @@ std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<fl
       const double s_max = std::exp(double(std::max({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]})));
       reach = std::sqrt(path.radius * path.radius + s_max * s_max);
     }
-    for (size_t s = 0; s < boxes.size(); ++s) {
+    uint8_t verdict = kOffPath;
+    for (size_t s = 0; s < boxes.size() && verdict != kInTube; ++s) {
       const auto& box = boxes[s];
-      if (p[0] < box[0] - reach || p[1] < box[1] - reach || p[2] < box[2] - reach || p[0] > box[3] + reach ||
-          p[1] > box[4] + reach || p[2] > box[5] + reach)
+      const double r = std::max(reach, gap_reach[s]);
+      if (p[0] < box[0] - r || p[1] < box[1] - r || p[2] < box[2] - r || p[0] > box[3] + r || p[1] > box[4] + r ||
+          p[2] > box[5] + r)
         continue;
-      const bool on = path.by_extent ? tube_mahalanobis2(p, path.from[s], path.to[s], &log_scales[3 * i],
-                                                         &quats[4 * i], path.radius) <= 1.0
-                                     : distance_to_segment(p, path.from[s], path.to[s]) <= path.radius;
-      if (on) {
-        out[size_t(i)] = 1;
-        break;
-      }
+      const bool in_tube = path.radius > 0 &&
+                           (path.by_extent ? tube_mahalanobis2(p, path.from[s], path.to[s], &log_scales[3 * i],
+                                                               &quats[4 * i], path.radius) <= 1.0
+                                           : distance_to_segment(p, path.from[s], path.to[s]) <= path.radius);
+      if (in_tube)
+        verdict = kInTube;
+      else if (gaps && verdict == kOffPath && in_blind_gap(p, path.from_camera[s], path.to_camera[s], path.blind_gap))
+        verdict = kInBlindGap;
     }
+    out[size_t(i)] = verdict;
   }
   return out;
 }

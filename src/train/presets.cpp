@@ -36,7 +36,8 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stats.gradient_per_seen_pixel = false;
     c.densify.split_screen_needs_grad = false;
     c.densify.inherit_moments = false;
-    c.densify.camera_path.radius = 0.0f;  // no camera-path cull
+    c.densify.camera_path.radius = 0.0f;     // no camera-path cull …
+    c.densify.camera_path.blind_gap = 0.0f;  // … nor blind-gap cull
     c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view
     c.distractors.lambda_explained = 0.0f;
     c.distractors.lambda_owned = 0.0f;

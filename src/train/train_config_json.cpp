@@ -76,6 +76,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"densify.camera_path_radius", &c.densify.camera_path.radius},
       {"densify.camera_path_max_segment", &c.densify.camera_path.max_segment},
       {"densify.camera_path_by_extent", &c.densify.camera_path.by_extent},
+      {"densify.camera_path_blind_gap", &c.densify.camera_path.blind_gap},
       {"distractors.enabled", &c.distractors.enabled},
       {"distractors.initial_count", &c.distractors.initial_count},
       {"distractors.reference_pixels", &c.distractors.reference_pixels},
@@ -250,6 +251,7 @@ void validate_config(const TrainConfig& c) {
   require("densify.cull_screen_size", c.densify.cull_screen_size, 0, kBig, true, "> 0");
   require("densify.camera_path_radius", c.densify.camera_path.radius, 0, kBig, false, "≥ 0 (0 turns the rule off)");
   require("densify.camera_path_max_segment", c.densify.camera_path.max_segment, 0, kBig, true, "> 0");
+  require("densify.camera_path_blind_gap", c.densify.camera_path.blind_gap, 0, kBig, false, "≥ 0 (0 turns the rule off)");
   require("distractors.init_depth", c.distractors.init_depth, 0, kBig, true, "> 0");
   require("distractors.init_half_width", c.distractors.init_half_width, 0, kBig, true, "> 0");
   require("distractors.init_opacity", c.distractors.init_opacity, 0, 0.999, true, "in (0, 0.999]");

@@ -147,7 +147,8 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
 void Trainer::cull_camera_path(RefineReport& report) {
   const GaussianSet& g = gaussians_.params;
   const std::vector<uint8_t> on_path = on_camera_path(camera_path_, g.means, g.log_scales, g.quats);
-  const int64_t culled = std::count(on_path.begin(), on_path.end(), 1);
+  const int64_t in_gaps = std::count(on_path.begin(), on_path.end(), uint8_t(kInBlindGap));
+  const int64_t culled = std::count(on_path.begin(), on_path.end(), uint8_t(kInTube)) + in_gaps;
   if (culled == 0) return;
   std::vector<uint8_t> keep(on_path.size());
   for (size_t i = 0; i < on_path.size(); ++i) keep[i] = !on_path[i];
@@ -155,6 +156,7 @@ void Trainer::cull_camera_path(RefineReport& report) {
   report.on_camera_path += culled;
   report.culled += culled;
   camera_path_culled += culled;
+  camera_path_blind_gap_culled += in_gaps;
 }
 
 size_t Trainer::distractor_count() const {

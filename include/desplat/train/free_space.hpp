@@ -2,11 +2,12 @@
 // camera from one photo to the next, so the space between two consecutive photos' camera
 // centres held nothing solid. A static Gaussian there is a floater: no training view sees it
 // from near (it is behind or beside them, or too close to count in their loss), yet a test
-// view taken on the same path looks straight into it.
+// view taken on the same path looks straight into it. Two rules: a tube about the path, and
+// the blind gap in front of each step that neither of its two photos sees.
 //
 // Units: positions in the normalized world frame (docs/METHOD.md §1); the radius and the
-// longest segment are fractions of the median scene depth, so the rule does not depend on the
-// scene's scale.
+// longest segment are fractions of the median scene depth, the blind gap a fraction of each
+// step's length, so the rules do not depend on the scene's scale.
 #pragma once
 
 #include <array>
@@ -35,16 +36,27 @@ struct CameraPathSettings {
   // gained on one sky scene of four and lost a little on the other three
   // (docs/bench/issue15_effects.md, "The camera-path cull by extent").
   bool by_extent = false;
+  // Cull static Gaussians in the blind gap between two consecutive photos: within this × the
+  // step between them of the segment joining their centres, in front of the pair, and in
+  // neither photo. No photo taken near such a Gaussian constrains it; only far views do, which
+  // see it against the sky or background, so they paint sky there (a ring of inward-looking
+  // cameras under a sky). A view taken between the two photos looks into it from under half a
+  // step. 0 turns the rule off (--preset paper). 0.5 found blind-gap Gaussians on every sky
+  // scene and none on the sky-free ones nor on fox, where 1.0 already reached the scenes'
+  // own Gaussians (docs/bench/issue15_effects.md, "The blind gaps between photos").
+  float blind_gap = 0.5f;
 };
 
-// The segments between consecutive training cameras that the rule keeps, and its radius.
+// The segments between consecutive training cameras that the rules keep, and their sizes.
 struct CameraPath {
   std::vector<std::array<double, 3>> from, to;  // segment endpoints (camera centres) [world]
-  double radius = 0;                            // [world units]; 0: no rule
+  double radius = 0;                            // [world units]; 0: no tube rule
   bool by_extent = false;                       // CameraPathSettings::by_extent
   double median_depth = 0;                      // [world units]; 0: no points in front of any camera
   std::size_t skipped_segments = 0;             // consecutive pairs farther apart than max_segment
-  bool empty() const { return from.empty() || radius <= 0; }
+  double blind_gap = 0;                         // CameraPathSettings::blind_gap; 0: no blind-gap rule
+  std::vector<Camera> from_camera, to_camera;   // the segments' endpoint cameras (for blind_gap)
+  bool empty() const { return from.empty() || (radius <= 0 && blind_gap <= 0); }
 };
 
 // Per camera, the median depth (camera-space z) of the points in front of it (z > 0); then the
@@ -52,7 +64,8 @@ struct CameraPath {
 double median_scene_depth(const std::vector<Camera>& cameras, const std::vector<std::array<float, 3>>& points);
 
 // The path through `cameras` in the order given (training views sorted by name: the capture
-// order of a phone or camera). Without points, or with settings.radius 0, the path is empty.
+// order of a phone or camera). Without points, or with settings.radius and blind_gap both 0,
+// the path is empty.
 CameraPath camera_path(const std::vector<Camera>& cameras, const std::vector<std::array<float, 3>>& points,
                        const CameraPathSettings& settings);
 
@@ -66,9 +79,18 @@ double distance_to_segment(const std::array<double, 3>& p, const std::array<doub
 double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a,
                          const std::array<double, 3>& b, const float* log_scale, const float* quat, double r);
 
-// Per Gaussian of `means` [N·3, world], 1 when it is on the path: its centre within path.radius
-// of a segment, or with path.by_extent (then `log_scales` [N·3] and `quats` [N·4] are needed)
-// tube_mahalanobis2 ≤ 1 for a segment.
+// Whether world point p lies in the blind gap of the segment from camera a to camera b: within
+// gap_fraction × |b − a| of the segment, in front of it ((p − midpoint) · (a's + b's viewing
+// direction) > 0), and in neither camera's image (Camera::pixel_of is −1 for both).
+bool in_blind_gap(const std::array<double, 3>& p, const Camera& a, const Camera& b, double gap_fraction);
+
+// What on_camera_path found for a Gaussian.
+enum PathVerdict : uint8_t { kOffPath = 0, kInTube = 1, kInBlindGap = 2 };
+
+// Per Gaussian of `means` [N·3, world], its PathVerdict: kInTube when its centre lies within
+// path.radius of a segment, or with path.by_extent (then `log_scales` [N·3] and `quats` [N·4]
+// are needed) tube_mahalanobis2 ≤ 1 for a segment; else kInBlindGap when in_blind_gap holds
+// for a segment (path.blind_gap > 0); else kOffPath.
 std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<float>& means,
                                     const std::vector<float>& log_scales = {}, const std::vector<float>& quats = {});
 

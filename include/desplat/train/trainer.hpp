@@ -288,7 +288,8 @@ class Trainer {
   // The camera path whose free space the static refinements keep clear (free_space.hpp), and
   // how many static Gaussians it culled in this process (not kept across a resume).
   const CameraPath& camera_path() const { return camera_path_; }
-  int64_t camera_path_culled = 0;
+  int64_t camera_path_culled = 0;            // by either rule of train/free_space.hpp, this run
+  int64_t camera_path_blind_gap_culled = 0;  // of those, by the blind-gap rule
   void set_step(int64_t s) { step_ = s; }
   // The latest step's pixels neither layer explains [H·W of that step's camera]; after a step
   // that seeded distractors, the eroded mask they were drawn from. For inspection.
