@@ -41,9 +41,10 @@ struct CameraPathSettings {
   // neither photo. No photo taken near such a Gaussian constrains it; only far views do, which
   // see it against the sky or background, so they paint sky there (a ring of inward-looking
   // cameras under a sky). A view taken between the two photos looks into it from under half a
-  // step. 0 turns the rule off (--preset paper). 0.5 found blind-gap Gaussians on every sky
-  // scene and none on the sky-free ones nor on fox, where 1.0 already reached the scenes'
-  // own Gaussians (docs/bench/issue15_effects.md, "The blind gaps between photos").
+  // step. 0 turns the rule off (--preset paper). On the final models of runs without it, 0.5
+  // found 11–36 such Gaussians in each sky scene's runs and none in the sky-free scenes' or
+  // the exposure-varied fox's; 1.0 found 61–109 in the sky-free scenes' too (docs/bench/issue15_effects.md,
+  // "The blind gaps between photos").
   float blind_gap = 0.5f;
 };
 
