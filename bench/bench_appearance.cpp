@@ -39,39 +39,27 @@ struct Setup {
   }
 };
 
-void BM_AppearanceForwardBackward(benchmark::State& state) {
+// range(2): 1 = forward and backward (a training step), 0 = forward alone (a render).
+void BM_Appearance(benchmark::State& state) {
   Setup s(size_t(state.range(0)));
   const int threads = int(state.range(1));
+  const bool backward = state.range(2) != 0;
   AppearancePass pass;
   for (auto _ : state) {
     s.fw.rgb = s.rgb;
     pass.forward(s.model, s.model.embedding(1), s.g, s.fw, threads);
-    pass.backward(s.model, s.model.embedding(1), s.g, s.grads, threads);
+    if (backward) pass.backward(s.model, s.model.embedding(1), s.g, s.grads, threads);
+    benchmark::DoNotOptimize(s.fw.rgb.data());
     benchmark::DoNotOptimize(pass.d_mlp.data());
   }
   state.counters["gaussians"] = double(state.range(0));
 }
-BENCHMARK(BM_AppearanceForwardBackward)
-    ->Args({40000, 1})
-    ->Args({40000, 2})
-    ->ArgNames({"visible", "threads"})
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
-
-void BM_AppearanceForward(benchmark::State& state) {
-  Setup s(size_t(state.range(0)));
-  const int threads = int(state.range(1));
-  AppearancePass pass;
-  for (auto _ : state) {
-    s.fw.rgb = s.rgb;
-    pass.forward(s.model, s.model.embedding(1), s.g, s.fw, threads);
-    benchmark::DoNotOptimize(s.fw.rgb.data());
-  }
-}
-BENCHMARK(BM_AppearanceForward)
-    ->Args({40000, 1})
-    ->Args({40000, 2})
-    ->ArgNames({"visible", "threads"})
+BENCHMARK(BM_Appearance)
+    ->Args({40000, 1, 1})
+    ->Args({40000, 2, 1})
+    ->Args({40000, 1, 0})
+    ->Args({40000, 2, 0})
+    ->ArgNames({"visible", "threads", "backward"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
