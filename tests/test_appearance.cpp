@@ -17,6 +17,7 @@
 #include "desplat/train/appearance.hpp"
 #include "desplat/train/effects.hpp"
 #include "desplat/train/loss.hpp"
+#include "desplat/train/open_sky.hpp"
 #include "desplat/train/training_checkpoint.hpp"
 #include "support/expect.hpp"
 #include "support/synthetic_views.hpp"
@@ -490,6 +491,41 @@ TEST(Effects, AutoReadsEachViewsGainFromTheTracksAndTurnsAppearanceOnlyOnWhenThe
   const EffectsEvidence blind = examine_effects(no_tracks);
   EXPECT_FALSE(blind.appearance);
   EXPECT_CONTAINS(blind.reason, "too few to judge");
+}
+
+// The open-sky test (open_sky.hpp) on a hand-drawn 64 × 64 photo, 8 × 8 cells of 8 pixels: a
+// smooth sky above y = 24 and a 4-pixel checkerboard below, every ground cell holding an SfM
+// sample except three kinds: cell (5, 3), textured (SfM failed to match it: not sky); a smooth
+// 3 × 3-cell patch at columns 2–4, rows 4–6 enclosed by ground (not connected to the top edge:
+// not sky); and one sky cell (6, 1) that holds a sample (something SfM saw up there). The
+// answer, by construction: the 24 sky cells but (6, 1) are open, nothing else.
+TEST(OpenSky, CellsOfAHandDrawnPhoto) {
+  const int n = 64;
+  const Camera camera = look_at_camera(0.2f, 1.0f, n, n);
+  ByteImage photo{n, n, 3, std::vector<uint8_t>(size_t(n) * n * 3)};
+  auto in_patch = [](int cx, int cy) { return cx >= 2 && cx <= 4 && cy >= 4 && cy <= 6; };
+  std::vector<long long> samples;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const bool sky = y < 24, smooth = sky || in_patch(x / 8, y / 8);
+      const uint8_t v = smooth ? uint8_t(110 + y / 2) : (((x / 4 + y / 4) % 2) ? 204 : 51);
+      for (int c = 0; c < 3; ++c) photo.pixels[3 * (size_t(y) * n + x) + c] = v;
+    }
+  for (int cy = 0; cy < 8; ++cy)
+    for (int cx = 0; cx < 8; ++cx) {
+      const bool sampled = (cy >= 3 && !in_patch(cx, cy) && !(cx == 5 && cy == 3)) || (cx == 6 && cy == 1);
+      if (sampled) samples.push_back((long long)(cy * 8 + 3) * n + cx * 8 + 5);
+    }
+  const OpenSkyCells sky = open_sky_cells(camera, photo, samples, 8, 0.25f);
+  ASSERT_EQ(sky.cell, 8);
+  ASSERT_EQ(sky.columns, 8);
+  ASSERT_EQ(sky.rows, 8);
+  for (int cy = 0; cy < 8; ++cy)
+    for (int cx = 0; cx < 8; ++cx)
+      EXPECT_EQ(sky.open[size_t(cy) * 8 + cx], cy < 3 && !(cx == 6 && cy == 1)) << "cell " << cx << ", " << cy;
+  EXPECT_DOUBLE_EQ(sky.share(n, n), 23.0 * 64 / (n * n));
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { open_sky_cells(camera, photo, samples, 0, 0.25f); }),
+                  "columns must be ≥ 1");
 }
 
 // Known answer: the generator knows where it drew a sky. The bench capture looks down on its

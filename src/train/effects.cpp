@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "desplat/core/statistics.hpp"
+#include "desplat/train/open_sky.hpp"
 
 namespace desplat {
 
@@ -76,86 +77,26 @@ std::string fixed2(double x) {
   return buf;
 }
 
-// The share of `view`'s frame in grid cells (`columns` across, square) that look like sky:
-// open — none of `samples` (pixel indices) in them — and smooth — their texture (below) under
-// smooth_ratio × the median of the cells that hold samples (scale-free: relative to this
-// photo's own textured surfaces) — and connected to the top edge through such cells
-// (4-neighbours). Open but textured cells are surfaces SfM did not match (a repetitive
-// wallpaper), not sky.
-float open_top_share(const TrainView& view, const std::vector<long long>& samples, int columns, float smooth_ratio) {
-  const Camera& camera = view.camera;
-  const int cell = std::max(1, (camera.width + columns - 1) / columns);
-  const int cw = (camera.width + cell - 1) / cell, ch = (camera.height + cell - 1) / cell;
-  std::vector<uint8_t> occupied(size_t(cw) * ch, 0), open(size_t(cw) * ch, 0);
-  for (const long long p : samples)
-    occupied[size_t((p / camera.width) / cell) * cw + size_t((p % camera.width) / cell)] = 1;
-  // Texture per cell: the mean |Laplacian| of the luminance's kBlock × kBlock means. The means
-  // average sensor noise away; the Laplacian ignores a sky's smooth gradient.
-  constexpr int kBlock = 4;
-  const std::vector<uint8_t>& img = view.image.pixels;
-  auto value = [&](size_t i) { return byte_to_float(img[i]); };
-  const int bw = camera.width / kBlock, bh = camera.height / kBlock;
-  std::vector<float> block(size_t(std::max(bw, 0)) * std::max(bh, 0), 0.0f);
-  for (int y = 0; y < bh * kBlock; ++y)
-    for (int x = 0; x < bw * kBlock; ++x) {
-      const size_t p = 3 * (size_t(y) * camera.width + x);
-      block[size_t(y / kBlock) * bw + x / kBlock] +=
-          (0.299f * value(p) + 0.587f * value(p + 1) + 0.114f * value(p + 2)) / float(kBlock * kBlock);
-    }
-  std::vector<double> texture(size_t(cw) * ch, 0.0), count(size_t(cw) * ch, 0.0);
-  for (int y = 1; y + 1 < bh; ++y)
-    for (int x = 1; x + 1 < bw; ++x) {
-      const float* b = &block[size_t(y) * bw + x];
-      const float lap = std::abs(b[-1] + b[1] - 2 * b[0]) + std::abs(b[-bw] + b[bw] - 2 * b[0]);
-      const size_t c = size_t((y * kBlock + kBlock / 2) / cell) * cw + size_t((x * kBlock + kBlock / 2) / cell);
-      texture[c] += lap, count[c] += 1;
-    }
-  std::vector<double> surface;
-  for (size_t c = 0; c < texture.size(); ++c) {
-    texture[c] /= std::max(1.0, count[c]);
-    if (occupied[c]) surface.push_back(texture[c]);
-  }
-  const double smooth = smooth_ratio * (surface.empty() ? 0.0 : median(surface));
-  auto sky_like = [&](size_t c) { return !occupied[c] && texture[c] <= smooth; };
-  std::vector<int> stack;
-  for (int x = 0; x < cw; ++x)
-    if (sky_like(size_t(x))) open[x] = 1, stack.push_back(x);
-  while (!stack.empty()) {
-    const int c = stack.back();
-    stack.pop_back();
-    const int x = c % cw, y = c / cw;
-    for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-      const int nx = x + dx, ny = y + dy;
-      if (nx < 0 || ny < 0 || nx >= cw || ny >= ch) continue;
-      const int n = ny * cw + nx;
-      if (sky_like(size_t(n)) && !open[n]) open[n] = 1, stack.push_back(n);
-    }
-  }
-  // In pixels, so the partial cells at the right and bottom edges count for what they cover.
-  int64_t pixels = 0;
-  for (int y = 0; y < ch; ++y)
-    for (int x = 0; x < cw; ++x)
-      if (open[size_t(y) * cw + x])
-        pixels += int64_t(std::min(cell, camera.width - x * cell)) * std::min(cell, camera.height - y * cell);
-  return float(double(pixels) / (double(camera.width) * camera.height));
-}
-
 }  // namespace
 
 // Darker point colours give unstable ratios (a small shift of the sampled pixel, a blend with
 // a neighbour, JPEG noise are large relative to the value): they are left out.
 constexpr float kDarkest = 0.15f;
 
-EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r) {
-  EffectsEvidence ev;
+namespace {
+
+// A track element of a training view: the pixel (y · width + x, full resolution) where SfM
+// point `point` projects, inside the frame and on a kept pixel.
+struct TrackSample {
+  long long pixel;
+  size_t point;
+};
+
+std::vector<std::vector<TrackSample>> track_samples(const TrainingData& data) {
   const size_t n = data.points.size();
   if (data.point_train_views.size() != n || data.colors.size() != n)
     throw std::invalid_argument("examine_effects: track information does not match the points");
-  // Per view and channel, log₂(photo / point colour) of every sample whose colours are neither
-  // near black nor near saturation (where a ratio says nothing about exposure).
-  std::vector<std::array<std::vector<double>, 3>> ratios(data.train.size());
-  std::vector<int> samples(data.train.size(), 0);
-  std::vector<std::vector<long long>> sample_pixels(data.train.size());
+  std::vector<std::vector<TrackSample>> samples(data.train.size());
   for (size_t i = 0; i < n; ++i)
     for (const int32_t v : data.point_train_views[i]) {
       if (v < 0 || size_t(v) >= data.train.size())
@@ -163,12 +104,28 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
       const TrainView& view = data.train[size_t(v)];
       const long long pixel = view.camera.pixel_of(data.points[i]);
       if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;
-      ++samples[size_t(v)];
-      sample_pixels[size_t(v)].push_back(pixel);
+      samples[size_t(v)].push_back({pixel, i});
+    }
+  return samples;
+}
+
+}  // namespace
+
+EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r) {
+  EffectsEvidence ev;
+  // Per view and channel, log₂(photo / point colour) of every sample whose colours are neither
+  // near black nor near saturation (where a ratio says nothing about exposure).
+  const std::vector<std::vector<TrackSample>> track = track_samples(data);
+  std::vector<std::array<std::vector<double>, 3>> ratios(data.train.size());
+  std::vector<int> samples(data.train.size(), 0);
+  for (size_t v = 0; v < data.train.size(); ++v)
+    for (const TrackSample& s : track[v]) {
+      ++samples[v];
       for (int c = 0; c < 3; ++c) {
-        const float point = data.colors[i][c] / 255.0f, photo = byte_to_float(view.image.pixels[3 * size_t(pixel) + c]);
+        const float point = data.colors[s.point][c] / 255.0f,
+                    photo = byte_to_float(data.train[v].image.pixels[3 * size_t(s.pixel) + c]);
         if (point > kDarkest && point < 0.95f && photo > 0.02f && photo < 0.98f)
-          ratios[size_t(v)][c].push_back(std::log2(double(photo) / point));
+          ratios[v][c].push_back(std::log2(double(photo) / point));
       }
     }
   std::vector<double> brightness, open_shares;
@@ -176,7 +133,11 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
   for (size_t v = 0; v < data.train.size(); ++v) {
     ViewEvidence e{data.train[v].name, samples[v], {0, 0, 0}, 0.0f};
     if (samples[v] >= r.min_samples_per_view) {
-      e.open_top_share = open_top_share(data.train[v], sample_pixels[v], r.sky_grid, r.sky_smooth_ratio);
+      const TrainView& view = data.train[v];
+      std::vector<long long> pixels;
+      for (const TrackSample& s : track[v]) pixels.push_back(s.pixel);
+      const OpenSkyCells sky = open_sky_cells(view.camera, view.image, pixels, r.sky_grid, r.sky_smooth_ratio);
+      e.open_top_share = float(sky.share(view.camera.width, view.camera.height));
       open_shares.push_back(e.open_top_share);
     }
     bool judged = true;
