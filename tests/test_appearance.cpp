@@ -559,6 +559,45 @@ TEST(Effects, AutoTurnsTheBackgroundModelOnForASkyAndOnlyThen) {
   EXPECT_CONTAINS(why[1], "background on: in the median training view");
 }
 
+// The background's opaque term is off for a steady sky (BackgroundSettings::
+// opaque_off_for_steady_sky), by the same evidence as auto: the low-camera capture with a sky
+// and one exposure drops it; the same capture with per-photo exposure, the capture without a
+// sky, the sky capture without tracks, and the rule switched off keep it. Then a Trainer on the
+// steady sky trains bit for bit as one told λ_o = 0, and not as one with the term.
+TEST(Effects, TheOpaqueTermIsOffForASteadySkyOnly) {
+  const std::string low = R"(, "sky.enabled": true, "views.height": 1.0, "views.target": [0, 0, 0.5])";
+  const TrainingData sky = synth_capture("steady_sky", low);
+  const TrainingData exposed = synth_capture("exposed_sky", low + R"(, "exposure": {"stops": 1, "white_balance": 0.1})");
+  const TrainingData ground = synth_capture("steady_ground", "");
+  TrainingData blind = sky;
+  for (auto& views : blind.point_train_views) views.clear();
+  TrainConfig c;
+  c.distractors.enabled = false;
+  c.background.enabled = true;
+  EXPECT_EQ(effective_config(c, sky).background.lambda_opaque, 0.0f);
+  EXPECT_EQ(effective_config(c, exposed).background.lambda_opaque, 0.01f);
+  EXPECT_EQ(effective_config(c, ground).background.lambda_opaque, 0.01f);
+  EXPECT_EQ(effective_config(c, blind).background.lambda_opaque, 0.01f);
+  TrainConfig kept = c;
+  kept.background.opaque_off_for_steady_sky = false;
+  EXPECT_EQ(effective_config(kept, sky).background.lambda_opaque, 0.01f);
+
+  c.iterations = 40;
+  c.num_downscales = 0;
+  c.background.hidden_width = 16;
+  kept.iterations = 40;
+  kept.num_downscales = 0;
+  kept.background.hidden_width = 16;
+  TrainConfig zero = kept;
+  zero.background.lambda_opaque = 0.0f;
+  Trainer a(sky, c), b(sky, zero), live(sky, kept);
+  EXPECT_EQ(a.config().background.lambda_opaque, 0.0f);
+  for (int i = 0; i < 40; ++i) a.step(), b.step(), live.step();
+  EXPECT_EQ(a.gaussians().params.opacity_logits, b.gaussians().params.opacity_logits);
+  EXPECT_EQ(a.background().mlp, b.background().mlp);
+  EXPECT_NE(a.gaussians().params.opacity_logits, live.gaussians().params.opacity_logits);
+}
+
 // Auto adds appearance to the configured set when the evidence calls for it and never turns
 // off what the preset or --config turned on.
 TEST(Effects, AutoOnlyAddsAppearanceToTheConfiguredSet) {

@@ -299,13 +299,14 @@ std::string first_items(const std::vector<std::string>& items, size_t shown, con
 // (the last two move results by float rounding at most); they come from the command line or
 // config file when named there. Any other setting named there (`asked` is what it gives) must
 // agree with the record, or the resume is refused naming every setting that differs.
-TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfig& asked, const TrainingRunOptions& opt,
-                               const json& config_overrides, const json& resumed_run, const fs::path& record) {
+TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfig& asked, const TrainingData& data,
+                               const TrainingRunOptions& opt, const json& config_overrides, const json& resumed_run,
+                               const fs::path& record) {
   const bool settings_named = opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") ||
                               opt.seed || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
                               opt.no_regularization;
   if (settings_named) {
-    const std::vector<std::string> differ = config_differences(effective_config(asked), trained_with, record.string(),
+    const std::vector<std::string> differ = config_differences(effective_config(asked, data), trained_with, record.string(),
                                                                {"iterations", "threads", "kernel_isa"});
     if (!differ.empty()) {
       const std::string list = first_items(differ, 6, "; ");
@@ -475,7 +476,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     effects_evidence = effects_evidence_json(ev, why);
     effects_evidence["transients"] = transients;
   }
-  if (trained_with) config = settings_to_resume(*trained_with, config, opt, j, resumed_run, model.config_path());
+  if (trained_with) config = settings_to_resume(*trained_with, config, data, opt, j, resumed_run, model.config_path());
   std::printf("scene %s: %zu training and %zu test views at %dx%d, %zu points\n", data_dir.c_str(), data.train.size(),
               data.test.size(), data.train.empty() ? 0 : data.train[0].camera.width,
               data.train.empty() ? 0 : data.train[0].camera.height, data.points.size());

@@ -123,6 +123,7 @@ std::vector<Entry> fields(TrainConfig& c) {
       {"background.enabled", &c.background.enabled},
       {"background.image_dim", &c.background.image_dim},
       {"background.share_appearance_embedding", &c.background.share_appearance_embedding},
+      {"background.opaque_off_for_steady_sky", &c.background.opaque_off_for_steady_sky},
       {"background.hidden_width", &c.background.hidden_width},
       {"background.hidden_layers", &c.background.hidden_layers},
       {"background.sh_degree", &c.background.sh_degree},

@@ -13,6 +13,7 @@
 #include <stdexcept>
 
 #include "desplat/train/background.hpp"
+#include "desplat/train/effects.hpp"
 #include "desplat/train/init.hpp"
 #include "desplat/train/loss.hpp"
 #include "desplat/train/mask_coherence.hpp"
@@ -57,10 +58,18 @@ Camera downscale_camera(const Camera& c, int factor) {
   return out;
 }
 
-TrainConfig effective_config(TrainConfig config) {
+TrainConfig effective_config(TrainConfig config, const TrainingData& data) {
   // Transient points are DeSplat's: without distractors the model is the Splatfacto
   // baseline (--static-only, the bench's static-only runs) and starts from every point.
   if (!config.distractors.enabled) config.transient_points.action = TransientPointAction::keep;
+  // The background's opaque term is left out for a steady sky (BackgroundSettings, docs/METHOD.md
+  // §11): photos of one exposure and colour balance that show open sky, by --effects auto's
+  // evidence from the SfM tracks (none: the term stays).
+  if (config.background.enabled && config.background.opaque_off_for_steady_sky && config.background.lambda_opaque > 0 &&
+      !data.point_train_views.empty() && data.point_train_views.size() == data.points.size()) {
+    const EffectsEvidence ev = examine_effects(data);
+    if (ev.judged_views >= 3 && !ev.appearance && ev.background) config.background.lambda_opaque = 0.0f;
+  }
   return config;
 }
 
@@ -102,7 +111,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   };
   for (const TrainView& v : data_.train) check_size(v, coarsest, "training");
   for (const TrainView& v : data_.test) check_size(v, 1, "test");
-  config_ = effective_config(std::move(config_));
+  config_ = effective_config(std::move(config_), data_);
   std::vector<uint8_t> transient;
   if (config_.transient_points.action != TransientPointAction::keep) {
     transient = transient_points(data_, config_.transient_points);

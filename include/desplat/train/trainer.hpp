@@ -215,8 +215,9 @@ struct ViewMetrics {
 
 // The configuration a Trainer built from `config` trains with (what config.json records):
 // without distractors the model is the Splatfacto baseline and starts from every sparse
-// point, so the transient-point action is keep.
-TrainConfig effective_config(TrainConfig config);
+// point, so the transient-point action is keep; the background's opaque term is off for a
+// steady sky in `data` (BackgroundSettings::opaque_off_for_steady_sky).
+TrainConfig effective_config(TrainConfig config, const TrainingData& data);
 
 class Trainer {
  public:
