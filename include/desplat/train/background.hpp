@@ -48,8 +48,8 @@ struct BackgroundSettings {
   // term only makes the static layer paint the sky the background would draw (`s`/b, three
   // seeds: +0.25 dB without it). Where photos differ in colour, a half-transparent static layer
   // over a per-photo background fakes the change (`es`/ab, `tes`/dab −1.5 dB without it); with
-  // no sky the background fills holes the layer leaves (fox, background forced: −0.26 and
-  // −0.69 dB). docs/bench/issue15_effects.md, "The opaque term and a steady sky".
+  // no sky the term also measures as needed (fox, background forced: −0.26 and −0.69 dB).
+  // docs/bench/issue15_effects.md, "The opaque term and a steady sky".
   bool opaque_off_for_steady_sky = true;
   float explained_error = 0.003f;  // mean |photo − bg| over RGB below this …
   float explained_share = 0.6f;    // … in more than this share of the pixel's 3×3 box
