@@ -95,6 +95,8 @@ Fixture make_fixture(int n, unsigned seed) {
   for (float& c : f.fw.rgb) c = unit(rng);
   for (int i = 0; i < n; i += 5) f.fw.visible[size_t(i)] = 0;  // invisible rows get no change, no gradient
   for (int i = 0; i < 3 * n; ++i) f.weight.push_back(normal(rng));
+  // Visible rows whose colour reaches no pixel (zero loss weight): backward leaves them out.
+  for (int i = 2; i < n; i += 7) f.weight[3 * i] = f.weight[3 * i + 1] = f.weight[3 * i + 2] = 0.0;
   return f;
 }
 

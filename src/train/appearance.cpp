@@ -153,7 +153,7 @@ RowMat gather_inputs(const GaussianSet& g, const std::vector<int32_t>& rows, int
 // Hidden activations (after ReLU) and the outputs of one batch. `u` = the first layer's
 // embedding part plus its bias, the same for every row.
 void run_layers(const Layers& net, const RowMat& x, const Eigen::RowVectorXf& u, std::vector<RowMat>& hidden,
-                RowMat& out) {
+                RowMat* out) {
   const int inputs = int(x.cols());
   const int n_hidden = net.count() - 1;
   hidden.resize(n_hidden);
@@ -165,8 +165,9 @@ void run_layers(const Layers& net, const RowMat& x, const Eigen::RowVectorXf& u,
     hidden[l].rowwise() += net.b[l];
     hidden[l] = hidden[l].cwiseMax(0.0f);
   }
-  out.noalias() = hidden[n_hidden - 1] * net.w[n_hidden].transpose();
-  out.rowwise() += net.b[n_hidden];
+  if (!out) return;
+  out->noalias() = hidden[n_hidden - 1] * net.w[n_hidden].transpose();
+  out->rowwise() += net.b[n_hidden];
 }
 
 // u = W0[:, inputs:] e + b0.
@@ -210,7 +211,7 @@ void AppearancePass::forward(const AppearanceModel& model, std::span<const float
     RowMat out;
     for (int64_t r0 = slab_begin(count, s); r0 < slab_begin(count, s + 1); r0 += kBatch) {
       const int64_t r1 = std::min(r0 + kBatch, slab_begin(count, s + 1));
-      run_layers(net, gather_inputs(g, rows, r0, r1), u, hidden, out);
+      run_layers(net, gather_inputs(g, rows, r0, r1), u, hidden, &out);
       for (int64_t r = r0; r < r1; ++r) {
         const size_t i = size_t(rows[r]);
         for (int c = 0; c < 3; ++c) {
@@ -234,10 +235,21 @@ void AppearancePass::backward(const AppearanceModel& model, std::span<const floa
   check_inputs(model, e, g);
   const int f = g.feature_dim, stride = g.view().color_floats_per_gaussian();
   const int inputs = f + 3;
-  const int64_t count = int64_t(rows.size());
   if (grads.rgb.size() != 3 * g.size() || grads.colors.size() != g.colors.size())
     throw std::invalid_argument("appearance backward: the gradients are not those of this set's render");
   grads.features.assign(g.features.size(), 0.0f);
+  // A row whose colour reached no pixel (∂L/∂c̃ zero, or clamped, in every channel) adds
+  // exactly nothing to any gradient: only the others go through the MLP again.
+  std::vector<int32_t> live, live_gaussians;  // index into `rows`; the Gaussian's index
+  for (int64_t r = 0; r < int64_t(rows.size()); ++r) {
+    const size_t i = size_t(rows[r]);
+    bool reached = false;
+    for (int c = 0; c < 3; ++c) reached |= active[3 * r + c] && grads.rgb[3 * i + c] != 0.0f;
+    if (!reached) continue;
+    live.push_back(int32_t(r));
+    live_gaussians.push_back(rows[r]);
+  }
+  const int64_t count = int64_t(live.size());
   const Layers net(model, model.mlp.data());
   const Eigen::RowVectorXf u = embedding_term(net, e);
   std::vector<Layers> slab_grads(kSlabs, Layers(model));
@@ -247,19 +259,20 @@ void AppearancePass::backward(const AppearanceModel& model, std::span<const floa
   for (int s = 0; s < kSlabs; ++s) {
     Layers& d = slab_grads[s];
     std::vector<RowMat> hidden;
-    RowMat out, d_out, d_h, d_prev;
+    RowMat d_out, d_h, d_prev;
     for (int64_t r0 = slab_begin(count, s); r0 < slab_begin(count, s + 1); r0 += kBatch) {
       const int64_t r1 = std::min(r0 + kBatch, slab_begin(count, s + 1));
-      const RowMat x = gather_inputs(g, rows, r0, r1);
-      run_layers(net, x, u, hidden, out);
+      const RowMat x = gather_inputs(g, live_gaussians, r0, r1);
+      run_layers(net, x, u, hidden, nullptr);
       // ∂L/∂o from ∂L/∂c̃: β passes it where the clamp was inactive, γ scales c.
       d_out.resize(r1 - r0, 6);
-      for (int64_t r = r0; r < r1; ++r) {
+      for (int64_t q = r0; q < r1; ++q) {
+        const int64_t r = live[q];
         const size_t i = size_t(rows[r]);
         for (int c = 0; c < 3; ++c) {
           const float dt = active[3 * r + c] ? grads.rgb[3 * i + c] : 0.0f;
-          d_out(r - r0, c) = dt;
-          d_out(r - r0, 3 + c) = dt * sh_rgb[3 * r + c];
+          d_out(q - r0, c) = dt;
+          d_out(q - r0, 3 + c) = dt * sh_rgb[3 * r + c];
         }
       }
       // Back through the layers, last to first.
@@ -272,17 +285,17 @@ void AppearancePass::backward(const AppearanceModel& model, std::span<const floa
           dw.noalias() += d_h.transpose() * hidden[l - 1];
           d.b[l] += d_h.colwise().sum();
           d_prev.noalias() = d_h * w;
-          d_h = d_prev.cwiseProduct((hidden[l - 1].array() > 0.0f).cast<float>().matrix());
+          d_h = (hidden[l - 1].array() > 0.0f).select(d_prev, 0.0f);
         } else {
           dw.leftCols(inputs).noalias() += d_h.transpose() * x;
           slab_du[s] += d_h.colwise().sum();
           d_prev.noalias() = d_h * w.leftCols(inputs);
         }
       }
-      for (int64_t r = r0; r < r1; ++r) {
-        const size_t i = size_t(rows[r]);
-        for (int k = 0; k < f; ++k) grads.features[i * f + k] = d_prev(r - r0, k);
-        for (int c = 0; c < 3; ++c) grads.colors[i * stride + c] += d_prev(r - r0, f + c);
+      for (int64_t q = r0; q < r1; ++q) {
+        const size_t i = size_t(live_gaussians[q]);
+        for (int k = 0; k < f; ++k) grads.features[i * f + k] = d_prev(q - r0, k);
+        for (int c = 0; c < 3; ++c) grads.colors[i * stride + c] += d_prev(q - r0, f + c);
       }
     }
   }

@@ -107,7 +107,8 @@ struct AppearancePass {
                RasterOutput& fw, int threads);
   // From grads.rgb (rasterize_backward with rgb_scale): fills d_mlp and d_embedding, writes
   // ∂L/∂z into grads.features and adds ∂L/∂c̄ through the MLP's input to the DC coefficients
-  // in grads.colors. grads.features is resized to the set's shape (zero outside `rows`).
+  // in grads.colors. grads.features is resized to the set's shape (zero outside `rows`, and
+  // on rows whose colour reached no pixel, which the MLP's backward skips).
   void backward(const AppearanceModel& model, std::span<const float> embedding, const GaussianSet& gaussians,
                 RasterGradients& grads, int threads);
 };
