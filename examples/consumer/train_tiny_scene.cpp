@@ -19,6 +19,7 @@
 #include "desplat/synth/synth.hpp"
 
 namespace fs = std::filesystem;
+namespace synth = desplat::synth;
 
 namespace {
 
@@ -36,10 +37,10 @@ int main(int argc, char** argv) {
   const fs::path out = argv[1];
   try {
     // The default description: 8 views of 64×48 px around a small textured world (synth.hpp).
-    desplat::synth::GenerateOptions generate;
+    synth::GenerateOptions generate;
     generate.out = out / "scene";
     generate.overwrite = true;
-    const desplat::synth::GenerationReport scene = desplat::synth::generate_scene(desplat::synth::Description{}, generate);
+    const synth::GenerationReport scene = synth::generate_scene(synth::Description{}, generate);
     std::printf("scene: %d training and %d test views, %zu sparse points\n", scene.num_train, scene.num_test,
                 scene.num_points);
 
@@ -63,7 +64,8 @@ int main(int argc, char** argv) {
     const nlohmann::json metrics = nlohmann::json::parse(metrics_file);
     const int64_t steps = metrics.at("step").get<int64_t>();
     const double psnr = metrics.at("mean_psnr").get<double>();
-    if (steps != kSteps) return fail("metrics.json: step " + std::to_string(steps) + ", expected " + std::to_string(kSteps));
+    if (steps != kSteps)
+      return fail("metrics.json: step " + std::to_string(steps) + ", expected " + std::to_string(kSteps));
     if (!std::isfinite(psnr) || psnr <= 0) return fail("metrics.json: mean_psnr " + std::to_string(psnr));
     // Training learned: the loss of the last steps is below that of the first ones.
     std::vector<double> losses;
@@ -72,9 +74,12 @@ int main(int argc, char** argv) {
     if (losses.size() != static_cast<size_t>(kSteps))
       return fail("metrics.json: " + std::to_string(losses.size()) + " training entries in history, expected " +
                   std::to_string(kSteps));
-    const auto mean = [&](size_t from) { return std::accumulate(losses.begin() + from, losses.begin() + from + 10, 0.0) / 10; };
-    const double first = mean(0), last = mean(losses.size() - 10);
-    if (!(last < first)) return fail("the loss did not fall: " + std::to_string(first) + " → " + std::to_string(last));
+    const auto mean_of_10 = [&](size_t from) {
+      return std::accumulate(losses.begin() + from, losses.begin() + from + 10, 0.0) / 10;
+    };
+    const double first = mean_of_10(0), last = mean_of_10(losses.size() - 10);
+    if (!(last < first))
+      return fail("the loss did not fall: " + std::to_string(first) + " → " + std::to_string(last));
     for (const char* file : {"config.json", "report.html"})
       if (!fs::is_regular_file(options.out_dir / file)) return fail(std::string(file) + " is missing");
     std::printf("trained %lld steps: %zu Gaussians, loss %.4f → %.4f, test PSNR %.2f dB\n",
