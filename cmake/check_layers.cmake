@@ -2,7 +2,8 @@
 #   cmake -DROOT=<source tree> -P cmake/check_layers.cmake
 # Layers, bottom to top (docs/ARCHITECTURE.md). A file in include/desplat/<L>/ or src/<L>/ may
 #   - include "desplat/<M>/…" only when M is L or below it;
-#   - include a private header "<M>/…" of src/ only when M is L itself.
+#   - include a private header "<M>/…" of src/ only when M is L itself, and only from src/:
+#     a public header includes public headers alone, since an installed tree has no src/.
 # Every public header lives in a layer folder: include/desplat/<L>/.
 cmake_minimum_required(VERSION 3.22)
 set(LAYERS core raster io sfm train eval synth jobs)
@@ -38,6 +39,8 @@ foreach(layer IN LISTS LAYERS)
         endif()
       elseif(target MATCHES "^desplat/")
         string(APPEND problems "${file}: includes \"${target}\", which is in no layer folder\n")
+      elseif(file MATCHES "^include/")
+        string(APPEND problems "${file}: includes \"${target}\", which is not a public header; an installed public header can include only \"desplat/…\" headers\n")
       elseif(target MATCHES "^([^/]+)/")
         set(used ${CMAKE_MATCH_1})
         if(used IN_LIST LAYERS AND NOT used STREQUAL layer)

@@ -29,6 +29,9 @@ colmap::Camera make_lens(const CameraSpec& spec) {
   return cam;
 }
 
+// In Eigen rather than GLM: GLM's normalize, cross and products round differently, so the poses
+// the generator writes to images.bin would change in their last bits (docs/ARCHITECTURE.md,
+// "Which library owns what"); tests/test_pose_math.cpp checks this against glm::lookAt.
 ViewPose look_at(const Vector3d& center, const Vector3d& target) {
   const Vector3d forward = (target - center).normalized();
   // Looking straight up or down: any horizontal "right" will do.
