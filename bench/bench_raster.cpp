@@ -6,7 +6,7 @@
 //     training (docs/METHOD.md §5), seen from its first camera at 540×960;
 //   * trained fox: DESPLAT_BENCH_PLY (a desplat_train point_cloud.ply of the fox) from
 //     the same camera: the workload of a late training step;
-//   * trained fox at 270×480 (½ size): the full-resolution steps of the issue-16 command
+//   * trained fox at 270×480 (½ size): the full-resolution steps of the speed benchmark's command
 //     (`desplat_train --data fox --downscale 2`);
 //   * trained fox at 135×240 (the same camera at ¼ size): few pixels per Gaussian, so the
 //     per-Gaussian stages (projection, binning, sorting, the backward's per-Gaussian

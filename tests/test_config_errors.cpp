@@ -1,6 +1,6 @@
 // Every setting of config.json out of its range is one error naming the setting, what is
-// allowed and the value (issue 18's catalogue: SIGFPE on zero intervals, silently useless
-// rates and sizes). The defaults and both presets are valid.
+// allowed and the value (never a SIGFPE on a zero interval, never a silently useless rate or
+// size). The defaults and both presets are valid.
 #include <gtest/gtest.h>
 
 #include <algorithm>

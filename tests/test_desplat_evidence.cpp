@@ -8,7 +8,7 @@
 // What is asserted: the static layer scores a higher test PSNR and SSIM than the baseline
 // trained on the same occluded photos, the distractor masks match the occluders, and clean
 // views stay clean. (With occluders drawn independently for every view the baseline loses
-// only ~0.6 dB to them and DeSplat is level with it; README, "DeSplat on real photos".)
+// little to them and DeSplat is level with it; docs/BENCHMARKS.md, the occluded fox.)
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -74,7 +74,7 @@ TEST(DeSplatEvidence, OccludedFoxStaticLayerBeatsTheBaselineAndMasksMatchTheOccl
   const double ssim_ours = mean_of(ours, &ViewMetrics::ssim), ssim_theirs = mean_of(theirs, &ViewMetrics::ssim);
   std::printf("test views: DeSplat PSNR %.2f dB SSIM %.4f, static-only PSNR %.2f dB SSIM %.4f\n", psnr_ours,
               ssim_ours, psnr_theirs, ssim_theirs);
-  // The direction only, no margin: the measured gap (README) is what the claim rests on.
+  // The direction only, no margin: the measured gap (docs/BENCHMARKS.md) is what the claim rests on.
   EXPECT_GT(psnr_ours, psnr_theirs);
   EXPECT_GT(ssim_ours, ssim_theirs);
 

@@ -697,8 +697,8 @@ TEST(TrainerRules, TheOccluderColourPriorMakesAOneViewSquaresDistractorsOpaqueAn
     c.distractors.lambda_owned = 0.0f;
     c.distractors.lambda_occluder_colour = lambda;
     c.distractors.owned_after = after;
-    // The margin below was set with 4 px per distractor (the default until round 19). At 8 the
-    // 24×24 square holds half as many, and 400 steps leave the prior +0.02 of alpha, not +0.05.
+    // The margin below holds at 4 px per distractor, set here whatever the default: at 8 the
+    // 24×24 square holds half as many, and 400 steps leave the prior too little alpha to tell.
     c.distractors.pixels_per_distractor = 4;
     Trainer t(data, c);
     for (int i = 0; i < 400; ++i) t.step();
@@ -856,34 +856,34 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.background.lambda_alpha, 0.15f);
   EXPECT_EQ(paper.background.hidden_width, 128);
   EXPECT_EQ(paper.background.lr_image, 1e-3f);
-  // The defaults docs/bench/issue17_ab.md measured and docs/METHOD.md §7 documents.
+  // The defaults docs/METHOD.md §7 documents (their measurements: docs/BENCHMARKS.md).
   const TrainConfig def = preset_config("default");
   EXPECT_TRUE(def.densify.stats.normalize_each_step);
   EXPECT_FALSE(def.densify.stats.visible_count_from_one);
   EXPECT_TRUE(def.densify.split_screen_needs_grad);
   EXPECT_EQ(def.distractors.pixels_per_distractor, 6);
-  EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept: issue17_ab.md, round 6
-  EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept: issue17_ab.md, round 8
-  EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);    // round 20
-  EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);  // issue15_effects.md, the embeddings' rate
+  EXPECT_FALSE(def.distractors.count_connected_misses);  // measured, not kept
+  EXPECT_FALSE(def.densify.stats.hide_behind_distractors);  // measured, not kept
+  EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);
+  EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);  // the embeddings' rate, METHOD §10
   EXPECT_EQ(def.background.lr_image, def.appearance.lr_image);  // an own copy trains as the shared one
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
-  EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);  // measured best: docs/bench/issue17_ab.md, round 3
-  EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.4f);  // half the L1 weight 0.8: round 18
+  EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);
+  EXPECT_EQ(def.distractors.lambda_occluder_colour, 0.4f);  // half the L1 weight 0.8
   EXPECT_TRUE(def.distractors.reseed_starved_views);
   EXPECT_TRUE(def.distractors.seed_uncovered);
   EXPECT_EQ(def.distractors.grow_after, 0);
-  EXPECT_EQ(def.distractors.lambda_owned, 0.2f);  // round 4
+  EXPECT_EQ(def.distractors.lambda_owned, 0.2f);
   EXPECT_EQ(def.distractors.owned_after, def.resolution_schedule);  // the first resolution switch
-  EXPECT_EQ(def.distractors.seed_after, def.resolution_schedule);   // round 7
+  EXPECT_EQ(def.distractors.seed_after, def.resolution_schedule);   // the first resolution switch
   EXPECT_TRUE(def.distractors.seed_waits_after_reset);
-  EXPECT_EQ(def.distractors.min_blend_weight, 0.0f);  // the idle cull, measured, not kept: issue17_ab.md, round 9
-  EXPECT_EQ(def.distractors.max_alpha_sum, 2.3f);     // ≈ ln 10, round 14
-  EXPECT_EQ(def.distractors.refine_every_epochs, 3);  // round 4
+  EXPECT_EQ(def.distractors.min_blend_weight, 0.0f);  // the idle cull, measured, not kept
+  EXPECT_EQ(def.distractors.max_alpha_sum, 2.3f);     // ≈ ln 10
+  EXPECT_EQ(def.distractors.refine_every_epochs, 3);
   EXPECT_EQ(def.transient_points.action, TransientPointAction::drop);
   EXPECT_EQ(def.transient_points.min_track_images, 3);
   EXPECT_EQ(def.transient_points.color_tolerance, 0.25f);
-  EXPECT_EQ(def.appearance.hidden_width, 32);  // docs/bench/issue15_effects.md
+  EXPECT_EQ(def.appearance.hidden_width, 32);  // not the paper's 128, METHOD §10
   EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] { preset_config("fastest"); }),
                   "unknown preset 'fastest' (known: fast, default, paper)");
 }
@@ -929,7 +929,7 @@ TEST(Presets, FastGoesThroughEveryPhaseOfTheScheduleWithinItsSteps) {
   same.densify.stop_screen_size_at = def.densify.stop_screen_size_at;
   same.densify.reset_alpha_every = def.densify.reset_alpha_every;
   same.distractors.owned_after = def.distractors.owned_after;
-  // Seeding from the warm-up on (docs/bench/issue17_ab.md, round 7).
+  // Seeding from the warm-up on.
   EXPECT_EQ(fast.distractors.seed_after, 0);
   EXPECT_FALSE(fast.distractors.seed_waits_after_reset);
   same.distractors.seed_after = def.distractors.seed_after;

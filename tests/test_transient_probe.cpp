@@ -97,8 +97,8 @@ TEST(TransientProbe, ANeighbourThatSeesANearerSurfaceThereDoesNotJudgeThePoint) 
 }
 
 TEST(TransientProbe, AreasTheSizeOfAProbesOwnMisfitAreNotATransient) {
-  // On clean captures a probe leaves view-specific areas of up to 2.75 % of a frame, in up to 4
-  // views (docs/bench/issue15_effects.md): 5×5 px (2.1 % of 40×30) in three views is no
+  // On clean captures a probe leaves view-specific areas of just under 3 % of a frame, in a few
+  // views (docs/METHOD.md §10): 5×5 px (2.1 % of 40×30) in three views is no
   // transient, 7×7 px (4.1 %) in the same places is.
   for (const int size : {5, 7}) {
     std::vector<ProbeView> views = wall_views();

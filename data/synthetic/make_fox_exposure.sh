@@ -1,6 +1,6 @@
 #!/bin/bash
-# The fox with a different exposure and white balance in every photo (docs/bench/issue15_effects.md,
-# scene fox_expo): each photo, test views included, times 2^u (u uniform in [-1, 1]) times a
+# The fox with a different exposure and white balance in every photo (scene fox_expo of
+# docs/BENCHMARKS.md): each photo, test views included, times 2^u (u uniform in [-1, 1]) times a
 # per-channel factor 1 ± 10 %, clamped to [0, 1], saved as JPEG quality 95; the COLMAP model is
 # the fox's. Writes OUT/images, OUT/sparse and OUT/gains.txt. Needs python3 and oiiotool.
 set -euo pipefail

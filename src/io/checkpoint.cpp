@@ -26,7 +26,7 @@ static_assert(std::endian::native == std::endian::little,
 namespace fs = std::filesystem;
 
 // ---------------------------------------------------------------------------
-// CRC-32, slicing by 8 (about 8x faster than the bytewise table; checkpoints are large).
+// CRC-32, slicing by 8 (eight bytes per table round instead of one; checkpoints are large).
 
 namespace detail {
 namespace {

@@ -298,7 +298,7 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
                clutter);
     written.push_back(file);
   }
-  // Issue 17's summary: recovered fraction and mask IoU per DeSplat run against clutter.
+  // The clutter summary: recovered fraction and mask IoU per DeSplat run against clutter.
   const std::vector<ClutterSummaryRow> summary = clutter_summary(points);
   if (!summary.empty()) {
     const fs::path csv = out_dir / "clutter_summary.csv";

@@ -5,7 +5,7 @@
 // so exp(0) = 1 exactly: scripts/fit_exp_polynomial.py). Relative error ≤ 1.7e-7 over every
 // float in [−87, 0], 2.01 ulps at most (CUDA's __expf, which gsplat calls, is documented at
 // 2 + ⌊|1.173·x|⌋ ulps). A degree-7 Taylor polynomial had 0.94 ulps at most but two more
-// multiply-adds on every pixel's path to α (docs/bench/issue16_speed.md). Inputs below −87
+// multiply-adds on every pixel's path to α (docs/METHOD.md §3). Inputs below −87
 // return 0.
 #pragma once
 

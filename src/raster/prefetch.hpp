@@ -6,11 +6,10 @@
 
 namespace desplat::raster {
 
-// How many Gaussians ahead the loops ask for a row. Since the projection runs in blocks of 16
-// (gaussian_lanes.hpp), 24 measured best in training, where Adam has evicted the rows from the
-// cache by the next step. Samples in `preprocess` over the issue-16 command: 11,661 at 8,
-// 10,082 at 16, 6,361 and 6,986 at 24, 11,443 at 32, 7,730 at 48; on smaller models, whose
-// rows stay cached, 8 and 24 measured the same (docs/bench/issue16_speed.md).
+// How many Gaussians ahead the loops ask for a row. The projection runs in blocks of 16
+// (gaussian_lanes.hpp), so the distance covers the next block and a half; it matters in
+// training, where Adam has evicted the rows from the cache by the next step, and not on small
+// models whose rows stay cached (docs/BENCHMARKS.md, speed).
 constexpr int kRowPrefetchDistance = 24;
 
 // Asks for the cache lines of floats [row, row + count) to be read (or written) soon.

@@ -74,10 +74,9 @@ constexpr int kSplatPrefetch = 2;
 // DESPLAT_TILE_FULL_ROWS once per row, all 16 columns (one AVX-512 vector). On AVX-512 a
 // 16-lane pass costs what an 8-lane one does, and choosing between them per row was a
 // branch that followed the chord's shape; with one kind of pass per row the compiler also
-// keeps the backward's column sums in registers over the rows (measured: forward + backward
-// 1.09–1.10× faster, docs/bench/issue16_speed.md). Same bits: a pixel outside the chord has
-// α < 1/255 (tiles.hpp), so the extra lanes blend nothing and add nothing. Rows the chord
-// misses whole are still skipped (evaluating them too was 0.77×).
+// keeps the backward's column sums in registers over the rows. Same bits: a pixel outside
+// the chord has α < 1/255 (tiles.hpp), so the extra lanes blend nothing and add nothing. Rows
+// the chord misses whole are still skipped, since evaluating them costs more than the branch.
 template <typename Span>
 [[gnu::always_inline]] inline void for_each_span(int h0, int h1, Span&& span) {
   if (DESPLAT_TILE_FULL_ROWS) {

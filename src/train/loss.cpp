@@ -84,8 +84,8 @@ struct SsimShared {
 //
 // Fused row by row: each thread takes a band of position rows and slides down it, filtering
 // each input row horizontally into a ring of the last 11 and each position row vertically
-// from that ring, so the five statistics never exist as whole images (they did: 15 image
-// planes a step, each written and read again, docs/bench/issue16_speed.md). Every value is
+// from that ring, so the five statistics never exist as whole images (as whole images they
+// would be 15 planes a step, each written and read again). Every value is
 // the same sum in the same order as the separable filters give, whatever the band, so the
 // result does not depend on the thread count. One barrier: the backward's vertical pass reads
 // the partials of up to 10 position rows above its own band.

@@ -1,11 +1,11 @@
 #!/bin/bash
-# Issue 15's effect benchmark (docs/bench/issue15_effects.md): the eight combinations of
+# The effect benchmark (docs/BENCHMARKS.md): the eight combinations of
 # {transients, exposure and white balance, sky} from desplat_synth, each trained with every
 # one of the eight effect sets (none, d, a, b, da, db, ab, dab: d distractors, a appearance,
 # b background), two runs at a time, one thread each, 3,000 steps of --preset fast at full
 # resolution (160x120). `--effects auto` is not trained again: on all eight scenes it chooses
 # the simulated set and then trains what `--effects` naming that set trains, bit for bit
-# (docs/bench/issue15_effects.md), so summarize.py reads its row from that set's run.
+# (docs/METHOD.md §10), so summarize.py reads its row from that set's run.
 # What auto chooses (and how long its probe takes) is recorded by a 1-step auto run per scene.
 # A run whose metrics.json exists is kept, so an interrupted bench resumes where it stopped.
 # usage: run_bench.sh APPS_DIR WORK_DIR     (then summarize.py WORK_DIR/runs OUT_PREFIX)

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Issue 15's effect benchmark: one row per (scene, effect set) run of run_bench.sh.
+"""The effect benchmark (docs/BENCHMARKS.md): one row per (scene, effect set) run of run_bench.sh.
 
 usage: summarize.py RUNS_DIR OUT_PREFIX
 Writes OUT_PREFIX.csv, OUT_PREFIX.md (a markdown table) and OUT_PREFIX.png (test PSNR and

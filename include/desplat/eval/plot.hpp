@@ -1,4 +1,4 @@
-// Plots for people: report.html's curves and desplat_bench's figures (docs/bench/), drawn by
+// Plots for people: report.html's curves and desplat_bench's figures (docs/benchmarks/), drawn by
 // gnuplot (Debian's gnuplot-nox, run as a subprocess) so they get real axes, ticks, legends
 // and, as SVG, gnuplot's mouse script that shows the value under the pointer. One path for
 // every plot the project draws.

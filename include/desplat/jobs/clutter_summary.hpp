@@ -1,4 +1,4 @@
-// The clutter benchmark's summary (issue 17, docs/bench/issue17_ab.md): from desplat_bench's
+// The clutter benchmark's summary (docs/BENCHMARKS.md, clutter): from desplat_bench's
 // points on scenes that carry a clutter ratio, one row per DeSplat run and clutter level with
 // how much of what clutter costs the baseline DeSplat wins back.
 #pragma once

@@ -27,17 +27,16 @@ struct AppearanceSettings {
   bool enabled = false;
   int image_dim = 32;           // e_j
   int fourier_frequencies = 4;  // z_i has 6 per frequency: sin and cos of each axis
-  // 32 measured as good as the paper's 128 on per-image exposure and white balance at a third
-  // to a quarter of the cost (docs/bench/issue15_effects.md); --preset paper sets 128.
+  // 32, not the paper's 128: as good on per-image exposure and white balance at a fraction of
+  // the cost (docs/METHOD.md §10); --preset paper sets 128.
   int hidden_width = 32;
   int hidden_layers = 2;
   float lr_mlp = 5e-4f;  // z_i's rate is LearningRates::features
   // e_j's rate: the test-time fit's (test_lr). An image embedding learns only on its own view's
   // steps, one in V; at the paper's 1e-3 (--preset paper) the trained looks have not settled
   // (their spread grows in proportion to the rate) and the MLP grows steep in e, and the
-  // 128-step fit below falls short of where 1,024 steps get. At 1e-2 it does not, and test PSNR
-  // rose on every seed of four synthetic captures with per-photo exposure and on the fox with
-  // per-photo exposure (docs/bench/issue15_effects.md, "The image embeddings' rate").
+  // 128-step fit below falls short of where a long fit gets. At 1e-2 it does not
+  // (docs/METHOD.md §10).
   float lr_image = 1e-2f;
   // Test-time appearance (the Photo Tourism protocol): a held-out view's embedding is fitted
   // for this many Adam steps at this rate on the left half of the image, everything else frozen.
@@ -47,9 +46,7 @@ struct AppearanceSettings {
   // left half — each training view's embeddings scored by the photometric loss on a copy of
   // the test view at most kLookSearchPixels (trainer.hpp) across, one forward render each — so a photo far
   // from the average look does not spend its 128 steps getting there. Off (--preset paper):
-  // from the mean training look. It gained 0.68–0.88 dB on the means of four to ten seeds of
-  // two synthetic captures with per-photo exposure (docs/bench/issue15_effects.md, "Where the
-  // fit starts").
+  // from the mean training look (docs/METHOD.md §10).
   bool test_start_from_best_look = true;
 
   int feature_dim() const { return 6 * fourier_frequencies; }

@@ -45,11 +45,9 @@ struct BackgroundSettings {
   float lambda_opaque = 0.01f;
   // … except for a steady sky (effective_config sets λ_o to 0): photos of one exposure and
   // colour balance that show open sky, by --effects auto's evidence (effects.hpp). There the
-  // term only makes the static layer paint the sky the background would draw (`s`/b, three
-  // seeds: +0.25 dB without it). Where photos differ in colour, a half-transparent static layer
-  // over a per-photo background fakes the change (`es`/ab, `tes`/dab −1.5 dB without it); with
-  // no sky the term also measures as needed (fox, background forced: −0.26 and −0.69 dB).
-  // docs/bench/issue15_effects.md, "The opaque term and a steady sky".
+  // term only makes the static layer paint the sky the background would draw. Where photos
+  // differ in colour, the term is needed: without it a half-transparent static layer over a
+  // per-photo background fakes the change; with no sky it is needed too (docs/METHOD.md §11).
   bool opaque_off_for_steady_sky = true;
   float explained_error = 0.003f;  // mean |photo − bg| over RGB below this …
   float explained_share = 0.6f;    // … in more than this share of the pixel's 3×3 box

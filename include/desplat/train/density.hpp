@@ -26,8 +26,8 @@ struct DensifySettings {
   float cull_scale = 0.5f;            // after the first reset: cull max world scale above this
   float cull_screen_size = 0.15f;     // … or screen size above this before stop_screen_size_at
   bool enabled = true;
-  // Measured departures from the authors' code (docs/bench/issue17_ab.md; --preset paper
-  // sets the authors' side of each):
+  // Departures from the authors' code, each with its reason in docs/METHOD.md §7 (--preset
+  // paper sets the authors' side of each):
   StatisticsRules stats;
   // true: a large-on-screen Gaussian is split only if its gradient is high too. false
   // (authors): before stop_screen_size_at it is split whatever its gradient.

@@ -21,9 +21,9 @@ namespace desplat {
 
 struct CameraPathSettings {
   // Cull static Gaussians whose centre lies within this × the median scene depth of the path.
-  // 0 turns the rule off (--preset paper). 0.08 measured best of 0.05 and 0.08: the floaters
-  // that spoil a test view also lie beside the path, where the photo between two training
-  // photos passes close to them (docs/bench/issue15_effects.md, "The camera-path cull").
+  // 0 turns the rule off (--preset paper). The tube is wider than the path itself because the
+  // floaters that spoil a test view also lie beside it, where the photo between two training
+  // photos passes close to them (docs/METHOD.md §7).
   float radius = 0.08f;
   // Consecutive photos farther apart than this × the median scene depth are not a path the
   // camera was walked along (an unordered collection, a gap in the capture): no segment.
@@ -32,19 +32,17 @@ struct CameraPathSettings {
   // within one standard deviation of it in the metric of Σ + r²·I (its covariance with the
   // tube's radius r added in every direction). A point-sized Gaussian is the centre rule; a
   // large one whose centre lies just outside the tube but which sprawls across it (a sky
-  // floater painting clouds for far views) is on the path too (docs/METHOD.md §7). Off: it
-  // gained on one sky scene of four and lost a little on the other three
-  // (docs/bench/issue15_effects.md, "The camera-path cull by extent").
+  // floater painting clouds for far views) is on the path too (docs/METHOD.md §7). Off by
+  // default: it helped one sky scene of four and cost a little on the other three.
   bool by_extent = false;
   // Cull static Gaussians in the blind gap between two consecutive photos: within this × the
   // step between them of the segment joining their centres, in front of the pair, and in
   // neither photo. No photo taken near such a Gaussian constrains it; only far views do, which
   // see it against the sky or background, so they paint sky there (a ring of inward-looking
   // cameras under a sky). A view taken between the two photos looks into it from under half a
-  // step. 0 turns the rule off (--preset paper). On the final models of runs without it, 0.5
-  // found 11–36 such Gaussians in each sky scene's runs and none in the sky-free scenes' or
-  // the exposure-varied fox's; 1.0 found 61–109 in the sky-free scenes' too (docs/bench/issue15_effects.md,
-  // "The blind gaps between photos").
+  // step. 0 turns the rule off (--preset paper). 0.5 finds such Gaussians in sky scenes and
+  // none in sky-free ones; a wider gap (1.0) starts taking Gaussians of sky-free scenes too
+  // (docs/METHOD.md §7).
   float blind_gap = 0.5f;
 };
 

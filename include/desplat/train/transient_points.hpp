@@ -24,8 +24,9 @@ std::string to_string(TransientPointAction action);
 TransientPointAction transient_point_action_from_string(const std::string& text);
 
 struct TransientPointSettings {
-  // drop measured best (docs/bench/issue17_ab.md, round 2); --preset paper keeps, and the
-  // Trainer keeps every point when distractors are off (the Splatfacto baseline).
+  // drop, the default: a transient point seeds a static Gaussian on the occluder
+  // (docs/METHOD.md §5); --preset paper keeps, and the Trainer keeps every point when
+  // distractors are off (the Splatfacto baseline).
   TransientPointAction action = TransientPointAction::drop;
   // A point whose track holds fewer images than this is transient: an object that stays for
   // one or two photos is in only those photos' tracks.
@@ -36,8 +37,8 @@ struct TransientPointSettings {
   float color_tolerance = 0.25f;
   // Compare after each view's exposure and white balance (train/effects.hpp, view_gains): the
   // point's colour times the view's gain. Photos taken at different exposures disagree with a
-  // point's mean colour everywhere; without this a ±1-stop capture loses most of its points
-  // (docs/bench/issue17_ab.md, round 5). False: the colour as COLMAP stored it.
+  // point's mean colour everywhere; without this a ±1-stop capture loses most of its points.
+  // False: the colour as COLMAP stored it.
   bool per_view_gain = true;
 };
 

@@ -1,6 +1,6 @@
 // --effects auto's test for transients (docs/METHOD.md §10, transients): does any training
-// photo hold something the others do not? Colours along SfM tracks cannot tell
-// (docs/bench/issue15_effects.md), so auto asks a short static-only model instead. A static
+// photo hold something the others do not? Colours along SfM tracks cannot tell (they differ as
+// much on clean captures), so auto asks a short static-only model instead. A static
 // model fits what the views agree on; a transient shows as a compact area that one view leaves
 // unexplained while its neighbouring views explain the same surface points. Fitting error that
 // is not transient (fine texture, view-dependent shine) shows in the neighbours at the same
@@ -41,10 +41,8 @@ struct TransientRules {
   float min_area = 0.005f;
   // A view holds a transient when its counted areas cover at least this share of the frame;
   // the scene has transients when at least min_views_share of its views (and at least 2) do.
-  // 3 %: on clean captures the probe's own misfit passes the neighbour test in areas of up to
-  // 2.75 % of a view (38 probes: the fox at three sizes, its 24-view subset and `fox_expo`,
-  // and five clean synthetic scenes, several seeds each), often in 2–4 views; the transients
-  // tested cover 8–47 views at 3 % or more (docs/bench/issue15_effects.md).
+  // 3 %: on clean captures the probe's own misfit passes the neighbour test in areas just below
+  // that share of a view, and real transients cover many views above it (docs/METHOD.md §10).
   float view_share = 0.03f;
   float min_views_share = 0.05f;
 };
