@@ -54,8 +54,9 @@ ViewerCamera framing(const GaussianSet& g) {
     const glm::dvec3 d = mean_of(i) - center;
     spread += glm::dot(d, d) / double(n);
   }
-  // R = identity: the camera sits at centre − d·z, so t = −R·eye = d·z − centre.
-  const glm::dvec3 t = glm::dvec3(0, 0, 2.5 * std::sqrt(spread) + 1e-6) - center;
+  const double distance = 2.5 * std::sqrt(spread) + 1e-6;
+  // R = identity and eye = center − distance·z, so t = −R·eye = distance·z − center.
+  const glm::dvec3 t = glm::dvec3(0, 0, distance) - center;
   ViewerCamera c;
   c.t = {t.x, t.y, t.z};
   return c;
