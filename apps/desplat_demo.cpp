@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <glm/glm.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
 #include <random>
 
@@ -64,28 +66,27 @@ GaussianSet demo_scene() {
   return g;
 }
 
-// Camera on a circle of radius 3 around the origin, slightly above, looking at (0, 0.3, 0).
-// y points down in camera space, so "up" in the world is −y.
+// Camera on a circle of radius 3 around the origin, slightly above, looking at (0, 0.3, 0), in
+// COLMAP's convention (docs/METHOD.md §1): x right, y down, z forward, x_cam = R_cw·x + t_cw.
+// The world's up is −y. glm::lookAtRH is OpenGL's view matrix (x right, y up, looking along
+// −z), so its y and z rows are negated: R_cw = diag(1, −1, −1)·R_gl, t_cw = diag(1, −1, −1)·t_gl.
 Camera orbit_camera(float angle, int width, int height) {
-  const float eye[3] = {3.0f * std::sin(angle), -0.9f, -3.0f * std::cos(angle)};
-  const float target[3] = {0.0f, 0.3f, 0.0f};
-  float f[3], n = 0;
-  for (int k = 0; k < 3; ++k) f[k] = target[k] - eye[k], n += f[k] * f[k];
-  for (float& v : f) v /= std::sqrt(n);
-  const float down[3] = {0, 1, 0};
-  float r[3] = {down[1] * f[2] - down[2] * f[1], down[2] * f[0] - down[0] * f[2], down[0] * f[1] - down[1] * f[0]};
-  n = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-  for (float& v : r) v /= n;
-  const float d[3] = {f[1] * r[2] - f[2] * r[1], f[2] * r[0] - f[0] * r[2], f[0] * r[1] - f[1] * r[0]};
+  const glm::vec3 eye(3.0f * std::sin(angle), -0.9f, -3.0f * std::cos(angle));
+  const glm::vec3 target(0.0f, 0.3f, 0.0f), world_up(0.0f, -1.0f, 0.0f);
+  const glm::mat4 view_gl = glm::lookAtRH(eye, target, world_up);
+  const glm::mat3 gl_to_colmap(glm::vec3(1, 0, 0), glm::vec3(0, -1, 0), glm::vec3(0, 0, -1));  // by columns
+  const glm::mat3 R_cw = gl_to_colmap * glm::mat3(view_gl);
+  const glm::vec3 t_cw = gl_to_colmap * glm::vec3(view_gl[3]);
   Camera cam;
   cam.width = width;
   cam.height = height;
   cam.fx = cam.fy = 0.9f * width;
   cam.cx = width * 0.5f;
   cam.cy = height * 0.5f;
-  cam.R_cw = {r[0], r[1], r[2], d[0], d[1], d[2], f[0], f[1], f[2]};
-  for (int row = 0; row < 3; ++row)
-    cam.t_cw[row] = -(cam.R_cw[3 * row] * eye[0] + cam.R_cw[3 * row + 1] * eye[1] + cam.R_cw[3 * row + 2] * eye[2]);
+  for (int row = 0; row < 3; ++row) {  // GLM indexes [column][row]; Camera keeps R_cw row-major
+    for (int col = 0; col < 3; ++col) cam.R_cw[3 * row + col] = R_cw[col][row];
+    cam.t_cw[row] = t_cw[row];
+  }
   return cam;
 }
 

@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <glm/glm.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -342,9 +345,11 @@ std::optional<ViewerCamera> starting_camera(const json& config) {
         const bool one_focal = params.rfind("f,", 0) == 0;  // SIMPLE_*, RADIAL*, FOV: f, cx, cy, …
         ViewerCamera c;
         const auto [w, x, y, z] = image.qvec_wxyz;
-        c.R = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
-               2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-               2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+        // World → camera, normalized as the scene loader does. GLM stores a matrix by columns,
+        // so the transpose's storage is R_cw row-major, as ViewerCamera keeps it.
+        const glm::dmat3 R_cw = glm::mat3_cast(glm::normalize(glm::dquat(w, x, y, z)));
+        const glm::dmat3 R_cw_by_rows = glm::transpose(R_cw);
+        std::copy_n(glm::value_ptr(R_cw_by_rows), 9, c.R.begin());
         c.t = image.tvec;
         c.fx = cam.params[0];
         c.fy = one_focal ? cam.params[0] : cam.params[1];

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <glm/glm.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <numeric>
 #include <vector>
 
@@ -19,27 +21,20 @@ constexpr int kFloatsPerSplat = 13;  // mean (3), covariance xx xy xz yy yz zz (
 float sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
 // Mean, 3D covariance R·S²·Rᵀ and straight RGBA (SH DC colour, sigmoid opacity) per Gaussian.
+// The stored quaternion is (w, x, y, z) and need not be unit length (docs/METHOD.md §2).
 std::vector<float> pack(const GaussianSet& g, const std::vector<size_t>& chosen) {
   constexpr float kC0 = 0.28209479177387814f;  // SH band 0
   const int k = sh_coeff_count(g.sh_degree);
   std::vector<float> out;
   out.reserve(chosen.size() * kFloatsPerSplat);
   for (size_t i : chosen) {
-    double w = g.quats[4 * i], x = g.quats[4 * i + 1], y = g.quats[4 * i + 2], z = g.quats[4 * i + 3];
-    const double n = std::sqrt(w * w + x * x + y * y + z * z);
-    w /= n, x /= n, y /= n, z /= n;
-    const double R[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
-                            {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
-                            {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-    double s2[3];
-    for (int a = 0; a < 3; ++a) s2[a] = std::exp(2.0 * g.log_scales[3 * i + a]);
-    auto cov = [&](int r, int c) {
-      double v = 0;
-      for (int a = 0; a < 3; ++a) v += R[r][a] * s2[a] * R[c][a];
-      return float(v);
-    };
+    const float* q = &g.quats[4 * i];
+    const glm::dmat3 R = glm::mat3_cast(glm::normalize(glm::dquat(q[0], q[1], q[2], q[3])));
+    glm::dmat3 S2(0.0);
+    for (int a = 0; a < 3; ++a) S2[a][a] = std::exp(2.0 * g.log_scales[3 * i + a]);
+    const glm::dmat3 cov = R * S2 * glm::transpose(R);  // symmetric; GLM indexes [column][row]
     for (int a = 0; a < 3; ++a) out.push_back(g.means[3 * i + a]);
-    for (auto [r, c] : {std::pair{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}}) out.push_back(cov(r, c));
+    for (auto [r, c] : {std::pair{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}}) out.push_back(float(cov[c][r]));
     for (int c = 0; c < 3; ++c)
       out.push_back(std::clamp(0.5f + kC0 * g.colors[size_t(i) * k * 3 + c], 0.0f, 1.0f));
     out.push_back(sigmoid(g.opacity_logits[i]));
@@ -48,17 +43,22 @@ std::vector<float> pack(const GaussianSet& g, const std::vector<size_t>& chosen)
 }
 
 // The starting camera when the scene's cameras are not available: looking along +z at the
-// centroid from 2.5 times the spread.
+// centroid from 2.5 times the spread (the RMS distance to the centroid).
 ViewerCamera framing(const GaussianSet& g) {
-  ViewerCamera c;
-  double center[3] = {0, 0, 0}, spread = 0;
   const size_t n = g.size();
-  for (size_t i = 0; i < n; ++i)
-    for (int a = 0; a < 3; ++a) center[a] += g.means[3 * i + a] / double(n);
-  for (size_t i = 0; i < n; ++i)
-    for (int a = 0; a < 3; ++a) spread += std::pow(g.means[3 * i + a] - center[a], 2) / double(n);
-  const double d = 2.5 * std::sqrt(spread) + 1e-6;
-  c.t = {-center[0], -center[1], -center[2] + d};
+  auto mean_of = [&](size_t i) { return glm::dvec3(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]); };
+  glm::dvec3 center(0.0);
+  for (size_t i = 0; i < n; ++i) center += mean_of(i) / double(n);
+  double spread = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3 d = mean_of(i) - center;
+    spread += glm::dot(d, d) / double(n);
+  }
+  const double distance = 2.5 * std::sqrt(spread) + 1e-6;
+  // R = identity and eye = center − distance·z, so t = −R·eye = distance·z − center.
+  const glm::dvec3 t = glm::dvec3(0, 0, distance) - center;
+  ViewerCamera c;
+  c.t = {t.x, t.y, t.z};
   return c;
 }
 
