@@ -21,6 +21,8 @@
 namespace desplat {
 namespace {
 
+using test::project_mean;
+
 float logit(float p) { return std::log(p / (1 - p)); }
 
 TEST(DistractorGrowth, CapIsUnexplainedPixelsPerDistractor) {
@@ -210,16 +212,21 @@ TEST(DistractorGrowth, ReseedPutsOneDistractorOnEachDrawnUnexplainedPixel) {
                   "does not match the camera");
 }
 
+// Three pixels, black background, τ = 0.1 (mean |error| over RGB):
+// 0: static 0.5 grey opaque, target 0.52 → explained by static; composite also explains it.
+// 1: static 0.5, target 0.9 → unexplained by static; the distractor makes the composite right.
+// 2: static 0.2, target 0.8 → unexplained by both.
+struct ThreePixels {
+  std::vector<float> sc = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.2f, 0.2f, 0.2f}, sa = {1, 1, 1};
+  std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
+  std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
+  std::vector<float> composite = std::vector<float>(9);
+  ThreePixels() { composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite); }
+};
+
 TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
-  // Three pixels, black background, τ = 0.1 (mean |error| over RGB).
-  // 0: static 0.5 grey opaque, target 0.52 → explained by static; composite also explains it.
-  // 1: static 0.5, target 0.9 → unexplained by static; the distractor makes the composite right.
-  // 2: static 0.2, target 0.8 → unexplained by both.
-  const std::vector<float> sc = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.2f, 0.2f, 0.2f}, sa = {1, 1, 1};
-  const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
-  const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
-  std::vector<float> composite(9);
-  composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite);
+  const ThreePixels pixels;
+  const auto& [sc, sa, dc, da, target, composite] = pixels;
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const ViewResidual r =
@@ -312,14 +319,11 @@ TEST(ViewResidual, CountsStaticMissesInsideConnectedAreasOnly) {
   EXPECT_EQ(k.static_unexplained_in_areas, 0);
 }
 
-// The same three pixels with pixel 2 (unexplained by both) ignored by the user's mask: it is in
+// The ThreePixels with pixel 2 (unexplained by both) ignored by the user's mask: it is in
 // no count and never uncovered; the penalty averages over the two kept pixels.
 TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
-  const std::vector<float> sc = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.2f, 0.2f, 0.2f}, sa = {1, 1, 1};
-  const std::vector<float> dc = {0, 0, 0, 0.9f, 0.9f, 0.9f, 0, 0, 0}, da = {0.25f, 1, 0};
-  const std::vector<float> target = {0.52f, 0.52f, 0.52f, 0.9f, 0.9f, 0.9f, 0.8f, 0.8f, 0.8f};
-  std::vector<float> composite(9);
-  composite_layers({sc, sa}, {dc, da}, std::array<float, 3>{0, 0, 0}, composite);
+  const ThreePixels pixels;
+  const auto& [sc, sa, dc, da, target, composite] = pixels;
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const std::vector<float> keep = {1, 1, 0};

@@ -113,8 +113,6 @@ TEST(StatisticsRules, ScreenRadiusFromTheLargestEigenvalue) {
   EXPECT_FLOAT_EQ(b.max_screen_radius[0], 0.07f);
 }
 
-using test::project_mean;
-
 // Gaussian with mean gradient `grad` (threshold units; 4 steps, each normalized by its own
 // image size as the default StatisticsRules do) and screen size.
 void set_stats(TrainableGaussians& t, size_t i, float grad, float screen) {

@@ -21,6 +21,22 @@
 namespace desplat::test {
 namespace {
 
+// desplat_render --appearance view_1.png of the model in `model` draws exactly the static
+// column of view_1's training figure row; without --appearance (plain colours over the
+// evaluation background) it draws another image, the negative control. Renders go under
+// root/<tag>_look and root/<tag>_plain.
+void expect_render_in_view_1s_own_look(const fs::path& model, const fs::path& root, const std::string& tag) {
+  const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + model.string();
+  const fs::path look = root / (tag + "_look"), plain = root / (tag + "_plain");
+  const Outcome ok = run(render + " --out " + look.string() + " --views view_1.png --appearance view_1.png");
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  const FloatImage single = read_image_rgb(look / "view_1.png");
+  expect_static_column(read_image_rgb(model / "renders" / "train" / "view_1.png"), single);
+  const Outcome other = run(render + " --out " + plain.string() + " --views view_1.png");
+  ASSERT_EQ(other.exit_code, 0) << other.output;
+  EXPECT_NE(read_image_rgb(plain / "view_1.png").pixels, single.pixels);
+}
+
 // A background model (docs/METHOD.md §11): the run says so, scores by the Photo Tourism
 // protocol, and desplat_render --appearance shows a training view over that photo's own learned
 // background, exactly as the training figure's static column does.
@@ -35,16 +51,7 @@ TEST_F(TrainApp, BackgroundModelRendersOverAPhotosOwnBackground) {
   EXPECT_EQ(metrics["mean_psnr_right_half"], metrics["mean_psnr"]);
   EXPECT_TRUE(metrics["median_step_seconds_full_resolution"].contains("background"));
 
-  const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
-  const Outcome ok = run(render + " --out " + (root_ / "sky_look").string() + " --views view_1.png --appearance view_1.png");
-  ASSERT_EQ(ok.exit_code, 0) << ok.output;
-  const FloatImage single = read_image_rgb(root_ / "sky_look" / "view_1.png");
-  const FloatImage row = read_image_rgb(out / "renders" / "train" / "view_1.png");
-  expect_static_column(row, single);
-  // Negative control: over the evaluation colour it is another image.
-  const Outcome plain = run(render + " --out " + (root_ / "sky_plain").string() + " --views view_1.png");
-  ASSERT_EQ(plain.exit_code, 0) << plain.output;
-  EXPECT_NE(read_image_rgb(root_ / "sky_plain" / "view_1.png").pixels, single.pixels);
+  expect_render_in_view_1s_own_look(out, root_, "sky");
 }
 
 // Appearance and background together: the background reads the appearance embedding (the
@@ -81,15 +88,7 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   for (const auto& v : metrics["views"]) EXPECT_EQ(v["protocol"], metrics["protocol"]);
 
   const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
-  const Outcome ok = run(render + " --out " + (root_ / "look").string() + " --views view_1.png --appearance view_1.png");
-  ASSERT_EQ(ok.exit_code, 0) << ok.output;
-  const FloatImage single = read_image_rgb(root_ / "look" / "view_1.png");
-  const FloatImage row = read_image_rgb(out / "renders" / "train" / "view_1.png");
-  expect_static_column(row, single);
-  // Negative control: the plain colours are another image.
-  const Outcome plain_look = run(render + " --out " + (root_ / "plain").string() + " --views view_1.png");
-  ASSERT_EQ(plain_look.exit_code, 0) << plain_look.output;
-  EXPECT_NE(read_image_rgb(root_ / "plain" / "view_1.png").pixels, single.pixels);
+  expect_render_in_view_1s_own_look(out, root_, "appearance");
 
   const Outcome test_view = run(render + " --out " + (root_ / "look2").string() + " --appearance view_0.png");
   EXPECT_EQ(test_view.exit_code, 1);

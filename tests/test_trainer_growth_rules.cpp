@@ -21,6 +21,8 @@
 namespace desplat {
 namespace {
 
+using test::project_mean;
+
 TEST(TrainerRules, StatisticsRulesReachTheTrainer) {
   // Without resolution switches, normalizing each step's gradient by its own image size or
   // the sum by the refinement's is the same number: the same Gaussians are densified, in
