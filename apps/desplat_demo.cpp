@@ -11,6 +11,7 @@
 #include <numbers>
 #include <random>
 
+#include "desplat/core/spherical_harmonics.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/trainer.hpp"
@@ -20,7 +21,6 @@ namespace {
 using desplat::Camera;
 using desplat::GaussianSet;
 
-constexpr float kShY0 = 0.28209479177387814f;
 const std::array<float, 3> kEvalBackground = desplat::TrainConfig{}.eval_background;  // docs/METHOD.md §4
 
 // A checkered floor, a hue-striped sphere and a ring of small glossy Gaussians.
@@ -57,7 +57,7 @@ GaussianSet demo_scene() {
   for (size_t i = 0; i < items.size(); ++i) {
     const auto& it = items[i];
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = it[k], g.log_scales[3 * i + k] = it[3 + k];
-    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (it[6 + c] - 0.5f) / kShY0;
+    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (it[6 + c] - 0.5f) / float(kShBand0);
     // A little view dependence on the ring: degree-1 band along y.
     if (i + 240 >= items.size()) g.colors[stride * i + 3 * 1 + 0] = -0.4f;
     g.quats[4 * i] = 1;

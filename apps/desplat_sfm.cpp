@@ -1,12 +1,11 @@
 // desplat_sfm: camera poses and a sparse point cloud for a folder of photos, by running
 // colmap (CPU): feature extraction, matching, mapping. Writes the layout desplat_train reads.
+// Options only; the job is desplat::run_sfm_job.
 #include <CLI/CLI.hpp>
-#include <unistd.h>
 
-#include <cstdio>
 #include <string>
 
-#include "desplat/sfm/sfm.hpp"
+#include "desplat/jobs/sfm_run.hpp"
 
 namespace {
 
@@ -54,33 +53,6 @@ const char* kFooter =
     "\n"
     "Exit status: 0 on success; 1 when structure from motion fails, with a message that says\n"
     "what to do; other non-zero values for a bad command line.\n";
-
-std::string format_seconds(double s) {
-  char buf[32];
-  const int total = static_cast<int>(s + 0.5);
-  if (total >= 60)
-    std::snprintf(buf, sizeof buf, "%d min %02d s", total / 60, total % 60);
-  else
-    std::snprintf(buf, sizeof buf, "%.1f s", s);
-  return buf;
-}
-
-void print_summary(const sfm::SfmResult& r) {
-  std::printf("registered %d of %d photos, %d points; %s (features %s, %s matching %s, mapping %s)\n",
-              r.num_registered, r.num_photos, r.num_points, format_seconds(r.seconds).c_str(),
-              format_seconds(r.extract_seconds).c_str(), sfm::matcher_name(r.matcher),
-              format_seconds(r.match_seconds).c_str(), format_seconds(r.map_seconds).c_str());
-  std::printf("%s", sfm::describe_attempts(r).c_str());
-  std::printf("mean track length %.2f images, mean reprojection error %.2f px\n", r.mean_track_length,
-              r.mean_reprojection_error);
-  std::printf("model:  %s\n", r.sparse_dir.c_str());
-  std::printf("images: %s\n", r.images_dir.c_str());
-  std::printf("log:    %s\n", r.log.c_str());
-  const std::string lost = sfm::describe_lost_photos(r);
-  if (!lost.empty()) std::printf("%s", lost.c_str());
-  if (r.num_models > 1)
-    std::printf("note: colmap split the photos into %d models; the largest is sparse/0\n", r.num_models);
-}
 
 }  // namespace
 
@@ -131,19 +103,5 @@ int main(int argc, char** argv) {
   o.matcher = *sfm::matcher_from_name(matcher);
   o.cameras = *sfm::camera_sharing_from_name(cameras);
   if (stage_time_limit > 0) o.stage_time_limit_s = stage_time_limit;
-  const bool tty = ::isatty(STDOUT_FILENO) != 0;
-  if (!quiet) o.on_progress = sfm::terminal_progress(stdout, tty);
-  const char* newline = tty && !quiet ? "\n" : "";  // end a progress line left mid-way
-  try {
-    print_summary(sfm::run_sfm(o));
-  } catch (const sfm::SfmError& e) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "%sdesplat_sfm: error: %s\n", newline, e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "%sdesplat_sfm: unexpected error: %s\n", newline, e.what());
-    return 1;
-  }
-  return 0;
+  return desplat::run_sfm_job(o, quiet);
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "desplat/core/spherical_harmonics.hpp"
 #include "desplat/train/init.hpp"
 
 namespace desplat {
@@ -42,7 +43,7 @@ TEST(Init, GaussiansFollowReferenceRules) {
     for (int k = 0; k < 4; ++k) qn += double(g.quats[4 * i + k]) * g.quats[4 * i + k];
     EXPECT_NEAR(qn, 1.0, 1e-6);
     EXPECT_NEAR(1 / (1 + std::exp(-g.opacity_logits[i])), 0.1, 1e-6);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(g.colors[48 * i + c] * 0.28209479177387814 + 0.5, rgb[i][c] / 255.0, 1e-6);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(g.colors[48 * i + c] * kShBand0 + 0.5, rgb[i][c] / 255.0, 1e-6);
     for (int k = 3; k < 48; ++k) EXPECT_EQ(g.colors[48 * i + k], 0.0f);
   }
   // Same seed, same Gaussians; another seed, other rotations.

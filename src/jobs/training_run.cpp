@@ -5,6 +5,7 @@
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/jobs/model_folder.hpp"
 #include "desplat/jobs/report.hpp"
+#include "desplat/jobs/sfm_run.hpp"
 #include "jobs/text_format.hpp"
 
 #include <sys/resource.h>
@@ -22,7 +23,6 @@
 #include "desplat/io/image_io.hpp"
 #include "desplat/eval/mask_metrics.hpp"
 #include "desplat/io/ply.hpp"
-#include "desplat/sfm/sfm.hpp"
 #include "desplat/train/effects.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
@@ -36,14 +36,6 @@ using json = nlohmann::json;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-std::string format_duration(double s) {
-  char buf[32];
-  const int total = int(std::max(0.0, s));
-  if (total >= 3600) std::snprintf(buf, sizeof buf, "%dh%02dm", total / 3600, total / 60 % 60);
-  else std::snprintf(buf, sizeof buf, "%dm%02ds", total / 60, total % 60);
-  return buf;
-}
 
 // One progress line: rewritten in place on a terminal, printed every `log_every` steps
 // otherwise.
@@ -60,8 +52,8 @@ class Progress {
     const double eta = (total_ - step) / std::max(rate, 1e-9);
     char line[256];
     std::snprintf(line, sizeof line, "%6lld/%lld %3d%% ETA %s  loss %.4f  psnr %.2f  %zu Gaussians  %.2f it/s",
-                  (long long)step, (long long)total_, int(100 * step / total_), format_duration(eta).c_str(), s.loss,
-                  s.psnr, s.gaussians, rate);
+                  (long long)step, (long long)total_, int(100 * step / total_),
+                  format_duration(eta, DurationStyle::compact).c_str(), s.loss, s.psnr, s.gaussians, rate);
     if (tty_) {
       const int width = 20, filled = int(width * step / total_);
       std::printf("\r[%s%s] %s\033[K", std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(), line);
@@ -172,30 +164,6 @@ json model_cost(const Trainer& t) {
           {"distractor_mb", distractor_mb},
           {"views_with_distractors", nonempty},
           {"distractors_per_view", per_view}};
-}
-
-// What SfM made of the user's photos, including every file and photo it left out.
-json sfm_json(const sfm::SfmResult& r) {
-  json skipped = json::array(), unregistered = json::array(), attempts = json::array();
-  for (const sfm::SfmAttempt& a : r.attempts)
-    attempts.push_back({{"step", a.step}, {"settings", a.settings}, {"registered", a.registered},
-                        {"points", a.points}, {"seconds", a.seconds}});
-  for (const sfm::SkippedFile& f : r.skipped) skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
-  for (const sfm::SkippedFile& f : r.unregistered)
-    unregistered.push_back({{"photo", f.path.generic_string()}, {"reason", f.reason}});
-  return {{"photos", r.num_photos},
-          {"registered", r.num_registered},
-          {"points", r.num_points},
-          {"mean_track_length", r.mean_track_length},
-          {"mean_reprojection_error_px", r.mean_reprojection_error},
-          {"models", r.num_models},
-          {"seconds", r.seconds},
-          {"cameras", r.cameras.reason},
-          {"matching", r.matcher_reason},
-          {"attempts", attempts},
-          {"warning", r.warning},
-          {"skipped_files", skipped},
-          {"unregistered_photos", unregistered}};
 }
 
 }  // namespace
@@ -345,18 +313,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   fs::path data_dir = opt.data_dir;
   json sfm_summary;  // null unless this run ran SfM
   if (!opt.images_dir.empty()) {
-    sfm::SfmOptions sfm_options;
-    sfm_options.images = opt.images_dir;
-    sfm_options.out = opt.out_dir / "sfm";
-    sfm_options.overwrite = true;
-    sfm_options.on_progress = sfm::terminal_progress(stdout, isatty(fileno(stdout)));
-    const sfm::SfmResult r = sfm::run_sfm(sfm_options);
-    std::printf("SfM: %d of %d photos registered, %d points, mean track length %.2f, mean reprojection error %.2f px "
-                "(%.0f s)\n",
-                r.num_registered, r.num_photos, r.num_points, r.mean_track_length, r.mean_reprojection_error, r.seconds);
-    std::printf("%s%s", sfm::describe_attempts(r).c_str(), sfm::describe_lost_photos(r).c_str());
-    sfm_summary = sfm_json(r);
-    data_dir = sfm_options.out;
+    SfmForTraining sfm = run_sfm_for_training(opt.images_dir, opt.out_dir / "sfm");
+    sfm_summary = std::move(sfm.metrics);
+    data_dir = sfm.data_dir;
   }
 
   const std::string preset = opt.preset.value_or("default");
@@ -683,7 +642,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                             : "test PSNR " + fixed(metrics["mean_psnr"].get<double>(), 2) + " dB, SSIM " +
                                   fixed(metrics["mean_ssim"].get<double>(), 4);
   std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; %s\n", (long long)trainer.current_step(),
-              format_duration(wall).c_str(), trainer.gaussians().size(), trainer.distractor_count(), scores.c_str());
+              format_duration(wall, DurationStyle::compact).c_str(), trainer.gaussians().size(), trainer.distractor_count(), scores.c_str());
   if (!masks.views.empty())
     std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
                 masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);

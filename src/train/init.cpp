@@ -7,6 +7,8 @@
 #include <random>
 #include <stdexcept>
 
+#include "desplat/core/spherical_harmonics.hpp"
+
 namespace desplat {
 namespace {
 
@@ -18,8 +20,6 @@ struct PointCloudAdaptor {
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointCloudAdaptor>,
                                                    PointCloudAdaptor, 3, uint32_t>;
-
-constexpr float kShY0 = 0.28209479177387814f;
 
 }  // namespace
 
@@ -67,7 +67,7 @@ GaussianSet init_gaussians_from_points(const std::vector<std::array<float, 3>>& 
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = xyz[i][k], g.log_scales[3 * i + k] = log_scale;
     for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = q[k];
     g.opacity_logits[i] = opacity_logit;
-    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (rgb[i][c] / 255.0f - 0.5f) / kShY0;
+    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (rgb[i][c] / 255.0f - 0.5f) / float(kShBand0);
   }
   return g;
 }

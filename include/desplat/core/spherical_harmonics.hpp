@@ -10,13 +10,17 @@
 namespace desplat {
 
 constexpr int kMaxShDegree = 4;
+
+// Y₀₀ = 1/(2√π), the constant band-0 function: a colour's DC coefficient c shows as
+// 0.5 + kShBand0·c (the 3DGS convention every PLY reader shares).
+inline constexpr double kShBand0 = 0.28209479177387814;
 constexpr int sh_coefficients(int degree) { return (degree + 1) * (degree + 1); }
 
 // Fills Y[0 .. sh_coefficients(min(degree, MaxDegree))) for the unit direction (x, y, z).
 // MaxDegree (≤ kMaxShDegree) is the size Y was declared for: the Gaussians' colours stop at 3.
 template <typename T, int MaxDegree = 3> void sh_basis(int degree, T x, T y, T z, T* Y) {
   static_assert(MaxDegree >= 0 && MaxDegree <= kMaxShDegree);
-  Y[0] = T(0.2820947917738781);
+  Y[0] = T(kShBand0);
   if (degree < 1) return;
   Y[1] = T(-0.48860251190292) * y;
   Y[2] = T(0.48860251190292) * z;

@@ -63,9 +63,9 @@ enum class Matcher { Auto, Exhaustive, Sequential, Spatial };
 
 // Auto: exhaustive for up to this many photos; above it, sequential when the photos were taken
 // in file-name order (judge_capture_order), exhaustive otherwise. Exhaustive matching costs
-// O(n²) image pairs: 50 fox photos at 540×960 took 5.4 min on 2 cores (0.26 s per pair), so 100
-// photos is ~20 min, and 300 would be ~3 h; sequential matching (each photo against its 10
-// neighbours in file-name order, plus quadratic overlap) is linear in n, but it only pairs
+// O(n²) image pairs, so its time grows with the square of the photos and soon dominates the
+// run; sequential matching (each photo against its 10 neighbours in file-name order, plus
+// quadratic overlap) is linear in n, but it only pairs
 // photos that are near each other in name order, so on a shuffled collection it matches
 // almost nothing. colmap's vocabulary-tree matcher would be the linear choice for a large
 // collection, but it needs a trained tree file that Debian's colmap does not ship.
@@ -93,9 +93,9 @@ inline constexpr int kOrderThumbnailValues = 3 * kOrderThumbnailSize * kOrderThu
 // camera that moved a little sees the same things a little moved across the frame.
 inline constexpr int kOrderMaxShift = 1;
 // Ordered when neighbours are at most this fraction as far apart as photos half the capture
-// apart. Shuffled captures of 40 or more photos measure 0.93–1.06 (docs/bench/
-// issue19_registration.md), and the spread shrinks with more photos; the bar sits below that
-// because the two mistakes do not cost the same: an ordered capture taken for a collection is
+// apart. Shuffled captures sit near 1 (the two medians sample one distribution), with less
+// spread the more photos there are; the bar sits well below that because the two mistakes do
+// not cost the same: an ordered capture taken for a collection is
 // matched exhaustively (slower, every pair still found), a collection taken for ordered frames
 // is matched sequentially and loses the pairs far apart in name order.
 inline constexpr double kOrderedDistanceRatio = 0.8;
@@ -152,14 +152,14 @@ CameraChoice choose_cameras(CameraSharing requested, const std::vector<PhotoCame
 // The camera model when the user names none: OPENCV (fx, fy, cx, cy, k1, k2, p1, p2) for one
 // shared camera, which every photo constrains; SIMPLE_RADIAL (f, cx, cy, k, colmap's own
 // default) for one camera per photo, where eight intrinsics from one photo's matches are too
-// many: on 17 cropped, resized fox photos colmap placed 5 with OPENCV and 16 with SIMPLE_RADIAL.
+// many for colmap to place the photo reliably.
 const char* auto_camera_model(bool single_camera);
 
 enum class SfmStage { Extract, Match, Map };
 
-// Seconds a stage may take before it is taken for hung: about ten times what the stages took
-// on 2 cores (exhaustive matching of the 50 fox photos: 0.26 s per image pair), plus a fixed
-// margin for start-up. Extract 300 + 30·n; exhaustive matching 600 + 3·n(n−1)/2, other
+// Seconds a stage may take before it is taken for hung: about ten times what a stage needs on
+// a small CPU machine, so only a stuck colmap reaches it, plus a fixed margin for start-up.
+// Extract 300 + 30·n; exhaustive matching 600 + 3·n(n−1)/2 (3 s per image pair), other
 // matchers 600 + 60·n; mapping 600 + 60·n (n photos).
 double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos);
 
@@ -252,7 +252,8 @@ struct SfmResult {
 std::string describe_lost_photos(const SfmResult& result, size_t max_names = 20);
 
 // How the photos were placed, for a person: the camera choice and its reason, then one line per
-// attempt ("colmap defaults: 30 of 44 photos, 1189 points, 114 s (one shared camera, ...)"),
+// attempt ("colmap defaults: 30 of 44 photos, 1189 points, 114 s (one shared camera, ...)", an
+// example of the format),
 // then the warning if any.
 std::string describe_attempts(const SfmResult& result);
 

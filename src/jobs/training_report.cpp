@@ -1,161 +1,76 @@
-// report.html from a model folder's files (see include/desplat/jobs/report.hpp).
-#include "desplat/jobs/report.hpp"
-
-#include <unistd.h>
-
+// report.html for a trained model folder (see include/desplat/jobs/report.hpp): the summary,
+// structure from motion, the 3D viewer, curves, the step's time, the views and the config.
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <glm/glm.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <sstream>
-#include <thread>
+#include <string>
 #include <vector>
 
 #include "desplat/io/atomic_file.hpp"
-#include "desplat/jobs/model_folder.hpp"
-#include "desplat/eval/plot.hpp"
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/ply.hpp"
-#include "jobs/base64.hpp"
-#include "jobs/text_format.hpp"
+#include "desplat/jobs/model_folder.hpp"
+#include "desplat/jobs/report.hpp"
+#include "desplat/train/effects.hpp"
+#include "jobs/report_page.hpp"
 #include "jobs/splat_viewer.hpp"
+#include "jobs/text_format.hpp"
 
 namespace desplat {
 namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
+using namespace report;
 
-std::string read_bytes(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument("cannot read " + path.string());
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+// The effects the run recorded it modelled: metrics.json's effects.chosen, else config.json's
+// run.effects (Effects::to_string text); a folder that records neither is read by its mode.
+Effects recorded_effects(const json& m, const json& c) {
+  std::string text;
+  if (m.contains("effects") && m["effects"].is_object()) text = m["effects"].value("chosen", std::string());
+  if (text.empty() && c.contains("run") && c["run"].is_object()) text = c["run"].value("effects", std::string());
+  if (text.empty()) text = m.value("mode", "") == "desplat" ? "distractors" : "none";
+  return Effects::parse(text);
 }
 
-
-std::string escape_html(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
-    }
+// "static scene + per-view distractors (DeSplat); appearance and background are not modelled",
+// and how the set was chosen when --effects auto chose it.
+std::string effects_modelled(const json& m, const json& c) {
+  Effects e;
+  try {
+    e = recorded_effects(m, c);
+  } catch (const std::exception& error) {  // a hand-edited file: say so rather than guess
+    return std::string("unreadable (") + error.what() + ")";
   }
-  return out;
-}
-
-// shown() that says "inf" or "n/a" for values that are not numbers (a perfect PSNR, a missing key).
-std::string shown(double v, int digits) {
-  if (!std::isfinite(v)) return v > 0 ? "inf" : "n/a";
-  return fixed(v, digits);
-}
-
-double number(const json& j, const char* key, double fallback = NAN) {
-  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : fallback;
-}
-
-std::string duration(double s) {
-  if (!std::isfinite(s)) return "n/a";
-  const long t = std::lround(s);
-  char buf[48];
-  if (t >= 3600) std::snprintf(buf, sizeof buf, "%ld h %02ld min", t / 3600, t / 60 % 60);
-  else if (t >= 60) std::snprintf(buf, sizeof buf, "%ld min %02ld s", t / 60, t % 60);
-  else std::snprintf(buf, sizeof buf, "%.1f s", s);
-  return buf;
-}
-
-std::string cpu_model() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const size_t colon = line.find(':');
-      if (colon != std::string::npos) return line.substr(colon + 2);
-    }
-  return "unknown CPU";
-}
-
-// ---- Plots (eval/plot.hpp) ---------------------------------------------------------------------
-
-struct Series {
-  std::string label;
-  std::vector<std::pair<double, double>> points;
-};
-
-// SVG plots for the page; a plot that cannot be drawn leaves a note instead of failing the run.
-class Plotter {
- public:
-  explicit Plotter(fs::path scratch) : scratch_(std::move(scratch)) {}
-  ~Plotter() {
-    std::error_code ec;
-    fs::remove_all(scratch_, ec);
+  std::string text;
+  if (!e.distractors && !e.appearance && !e.background) {
+    text = "static scene only (the Splatfacto baseline)";
+  } else {
+    text = "static scene";
+    std::vector<std::string> off;
+    const auto part = [&](bool on, const char* what, const char* name) {
+      if (on) text += std::string(" + ") + what;
+      else off.push_back(name);
+    };
+    part(e.distractors, "per-view distractors (DeSplat)", "distractors");
+    part(e.appearance, "per-image appearance (exposure and colour)", "appearance");
+    part(e.background, "learned background (a colour per ray direction)", "background");
+    if (off.size() == 1) text += "; " + off[0] + (off[0] == "distractors" ? " are" : " is") + " not modelled";
+    if (off.size() == 2) text += "; " + off[0] + " and " + off[1] + " are not modelled";
   }
-
-  // The SVG's text, or "" when there is nothing to plot or it could not be drawn (note()).
-  std::string svg(const PlotSpec& spec, const std::vector<Series>& series) {
-    std::vector<PlotSeries> plot;
-    for (const Series& s : series) {
-      if (s.points.empty()) continue;
-      PlotSeries p{s.label, {}, {}};
-      for (const auto& [x, y] : s.points) p.x.push_back(x), p.y.push_back(y);
-      plot.push_back(std::move(p));
-    }
-    if (plot.empty()) return "";
-    PlotSpec sized = spec;
-    sized.width = 620, sized.height = 340;
-    try {
-      std::string svg = draw_plot(sized, plot, PlotFormat::Svg, scratch_);
-      ++drawn_;
-      return svg;
-    } catch (const std::exception& e) {  // PlotError, or no finite point
-      note_ = e.what();
-      return "";
-    }
-  }
-  int drawn() const { return drawn_; }
-  const std::string& note() const { return note_; }
-
- private:
-  fs::path scratch_;
-  std::string note_;
-  int drawn_ = 0;
-};
-
-// An SVG in an iframe of its own (gnuplot's scripts use fixed element ids).
-std::string plot_frame(const std::string& svg, const std::string& title) {
-  if (svg.empty()) return "";
-  std::string body = svg;
-  if (body.rfind("<?xml", 0) == 0) body = body.substr(body.find("?>") + 2);
-  return "<iframe class=\"plot\" title=\"" + escape_html(title) +
-         "\" srcdoc=\"" + escape_html("<!DOCTYPE html><html><body style='margin:0'>" + body + "</body></html>") +
-         "\"></iframe>\n";
-}
-
-// ---- Sections ----------------------------------------------------------------------------------
-
-std::string png_img(const fs::path& file, const std::string& alt) {
-  return "<img alt=\"" + escape_html(alt) + "\" src=\"data:image/png;base64," + base64(read_bytes(file)) + "\">";
-}
-
-std::string row(const std::string& key, const std::string& value) {
-  return "<tr><th>" + escape_html(key) + "</th><td>" + escape_html(value) + "</td></tr>\n";
+  const json by = m.contains("effects") && m["effects"].is_object() ? m["effects"].value("by", json()) : json();
+  if (by == "auto") text += " (chosen by --effects auto)";
+  return text;
 }
 
 std::string summary(const json& m, const json& c) {
   const json scene = c.value("scene", json::object());
   const json cost = m.value("cost", json::object());
-  const bool desplat = m.value("mode", "") == "desplat";
   std::string s = "<h2>Summary</h2>\n<table>\n";
   s += row("scene", scene.value("data_dir", std::string("?")) + " (downscale " +
                         std::to_string(scene.value("downscale", 1)) + ", " +
@@ -163,18 +78,16 @@ std::string summary(const json& m, const json& c) {
                         std::to_string(scene.value("test_views", json::array()).size()) + " test views" +
                         (scene.contains("masks_dir") ? ", masks from " + scene["masks_dir"].get<std::string>() : "") +
                         ")");
-  s += row("effects modelled",
-           desplat ? "static scene + per-view distractors (DeSplat); appearance and background are not modelled"
-                   : "static scene only (the Splatfacto baseline, --static-only)");
+  s += row("effects modelled", effects_modelled(m, c));
   s += row("test PSNR / SSIM", std::isnan(number(m, "mean_psnr"))
                                    ? "no test views"
                                    : shown(number(m, "mean_psnr"), 2) + " dB / " + shown(number(m, "mean_ssim"), 4));
   s += row("Gaussians", std::to_string(m.value("gaussians", 0)) + " static + " +
                             std::to_string(cost.value("distractor_gaussians", 0)) + " distractor");
   s += row("steps", std::to_string(m.value("step", 0)));
-  s += row("training time (this run)", duration(number(m, "wall_seconds_this_run")));
+  s += row("training time (this run)", format_duration(number(m, "wall_seconds_this_run")));
   s += row("peak memory", shown(number(m, "peak_memory_mb"), 0) + " MB");
-  s += row("machine", cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads");
+  s += row("machine", machine_text());
   const json& masks = m.contains("distractor_masks") ? m["distractor_masks"] : json();
   if (masks.is_object())
     s += row("distractor masks", "mean IoU " + shown(number(masks, "mean_iou"), 3) + " over " +
@@ -231,7 +144,7 @@ std::string structure_from_motion(const json& m) {
   s += "</table>\n<table><tr><th>step</th><th>photos placed</th><th>points</th><th>time</th><th>settings</th></tr>\n";
   for (const json& a : sfm.value("attempts", json::array()))
     s += "<tr><td>" + escape_html(a.value("step", "")) + "</td><td>" + std::to_string(a.value("registered", 0)) +
-         "</td><td>" + std::to_string(a.value("points", 0)) + "</td><td>" + duration(number(a, "seconds")) +
+         "</td><td>" + std::to_string(a.value("points", 0)) + "</td><td>" + format_duration(number(a, "seconds")) +
          "</td><td>" + escape_html(a.value("settings", "")) + "</td></tr>\n";
   s += "</table>\n";
   const auto list = [&](const char* key, const char* name_key, const std::string& heading) {
@@ -304,31 +217,6 @@ std::string step_breakdown(const json& m, Plotter& plotter) {
   return "<h2>Time of a step</h2>\n" + plot_frame(plotter.svg(p, {ms}), "step-time") + table + "</table>\n";
 }
 
-const char* kStyle = R"(<style>
-body { font-family: sans-serif; margin: 2em; color: #222; max-width: 1400px; }
-table { border-collapse: collapse; margin-bottom: 1em; }
-th, td { text-align: left; padding: 0.2em 1em 0.2em 0; border-bottom: 1px solid #ddd; }
-figure { display: inline-block; margin: 0.5em; vertical-align: top; }
-figure img { max-width: 100%; image-rendering: pixelated; min-width: 256px; }
-iframe.plot { width: 640px; height: 360px; border: none; }
-pre { background: #f6f6f6; padding: 1em; overflow-x: auto; }
-.note { color: #a40; }
-</style>)";
-
-// Counts broken images and drawn plots once the page has loaded (for people: nothing; for the
-// headless-browser test: data attributes on <body>).
-const char* kSelfCheck = R"(<script>
-window.addEventListener('load', function () {
-  var imgs = document.querySelectorAll('img'), broken = 0;
-  imgs.forEach(function (i) { if (!i.complete || i.naturalWidth === 0) broken++; });
-  var frames = document.querySelectorAll('iframe.plot'), drawn = 0;
-  frames.forEach(function (f) { var d = f.contentDocument; if (d && d.querySelector('svg path')) drawn++; });
-  document.body.setAttribute('data-images', imgs.length);
-  document.body.setAttribute('data-broken-images', broken);
-  document.body.setAttribute('data-plots', drawn);
-});
-</script>)";
-
 // The first test view's camera (else the first training view's), from the scene's COLMAP model,
 // in the PLY's frame; nullopt when the scene cannot be read (moved since training).
 std::optional<ViewerCamera> starting_camera(const json& config) {
@@ -372,66 +260,7 @@ std::string viewer(const fs::path& model_dir, const json& config) {
   return splat_viewer_section(read_gaussian_ply(ply), starting_camera(config), bg);
 }
 
-std::string page_start(const std::string& title) {
-  return "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + escape_html(title) +
-         "</title>" + kStyle + kSelfCheck + "</head><body>\n<h1>" + escape_html(title) + "</h1>\n";
-}
-
-std::string note_paragraph(const Plotter& plotter) {
-  return plotter.note().empty() ? "" : "<p class=\"note\">" + escape_html(plotter.note()) + "</p>\n";
-}
-
 }  // namespace
-
-ReportResult write_bench_report(const fs::path& out_dir, const std::vector<BenchPoint>& points) {
-  Plotter plotter(out_dir / ".report_tmp");
-  std::vector<std::string> scenes, runs;
-  for (const BenchPoint& p : points) {
-    if (std::find(scenes.begin(), scenes.end(), p.scene) == scenes.end()) scenes.push_back(p.scene);
-    if (std::find(runs.begin(), runs.end(), p.run) == runs.end()) runs.push_back(p.run);
-  }
-  std::string body = "<h2>Accuracy against training time</h2>\n";
-  for (const std::string& scene : scenes) {
-    std::vector<Series> psnr, iou;
-    for (const std::string& run : runs) {
-      Series p{run, {}}, m{run, {}};
-      for (const BenchPoint& b : points) {
-        if (b.scene != scene || b.run != run) continue;
-        p.points.push_back({b.train_seconds, b.psnr});
-        if (b.desplat && b.mask_iou >= 0) m.points.push_back({b.train_seconds, b.mask_iou});
-      }
-      psnr.push_back(p), iou.push_back(m);
-    }
-    body += plot_frame(plotter.svg(line_plot(scene + ": test PSNR against training time", "training wall time [s]",
-                                             "test PSNR [dB]"), psnr), scene + " psnr");
-    body += plot_frame(plotter.svg(line_plot(scene + ": distractor mask IoU against training time",
-                                             "training wall time [s]", "mask IoU"), iou), scene + " iou");
-  }
-  body += "<h2>Final point of every run</h2>\n<table><tr><th>scene</th><th>run</th><th>steps</th><th>training "
-          "time</th><th>test PSNR</th><th>SSIM</th><th>mask IoU</th><th>Gaussians static + distractor</th></tr>\n";
-  for (const std::string& scene : scenes)
-    for (const std::string& run : runs) {
-      const BenchPoint* last = nullptr;
-      for (const BenchPoint& b : points)
-        if (b.scene == scene && b.run == run && (!last || b.step > last->step)) last = &b;
-      if (!last) continue;
-      body += "<tr><td>" + escape_html(scene) + "</td><td>" + escape_html(run) + "</td><td>" +
-              std::to_string(last->step) + "</td><td>" + duration(last->train_seconds) + "</td><td>" +
-              shown(last->psnr, 2) + " dB</td><td>" + shown(last->ssim, 4) + "</td><td>" +
-              (last->mask_iou >= 0 ? shown(last->mask_iou, 3) : std::string("—")) + "</td><td>" +
-              std::to_string(last->static_gaussians) + " + " + std::to_string(last->distractor_gaussians) +
-              "</td></tr>\n";
-    }
-  body += "</table>\n<p>Every measured point: <code>bench.csv</code> in this folder.</p>\n";
-  const std::string html = page_start("desplat benchmark report") +
-                           row("machine", cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) +
-                                              " hardware threads")
-                               .insert(0, "<table>\n") +
-                           "</table>\n" + note_paragraph(plotter) + body + "</body></html>\n";
-  ReportResult r{out_dir / "report.html", plotter.drawn(), plotter.note()};
-  write_file_atomically(r.path, html);
-  return r;
-}
 
 ReportResult write_report(const fs::path& model_dir) {
   const ModelFolder model(model_dir);
