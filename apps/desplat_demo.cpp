@@ -57,7 +57,7 @@ GaussianSet demo_scene() {
   for (size_t i = 0; i < items.size(); ++i) {
     const auto& it = items[i];
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = it[k], g.log_scales[3 * i + k] = it[3 + k];
-    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (it[6 + c] - 0.5f) / float(kShBand0);
+    for (int c = 0; c < 3; ++c) g.colors[stride * i + c] = (it[6 + c] - 0.5f) / float(desplat::kShBand0);
     // A little view dependence on the ring: degree-1 band along y.
     if (i + 240 >= items.size()) g.colors[stride * i + 3 * 1 + 0] = -0.4f;
     g.quats[4 * i] = 1;
