@@ -28,29 +28,29 @@ struct DistractorSettings {
   float init_opacity = 0.1f;
   // Rates of §6; colors_dc is the RGB rate (colors_rest is unused in RGB mode). The
   // means' rate decays with the same schedule as the static means'.
-  LearningRates lr{1.6e-4f, 5e-2f, 1e-2f, 5e-2f, 2.5e-2f, 0.0f};
+  LearningRates lr{.means = 1.6e-4f, .log_scales = 5e-2f, .quats = 1e-2f, .opacity_logits = 5e-2f, .colors_dc = 2.5e-2f,
+                   .colors_rest = 0.0f};
   bool density_control = true;  // per-view split/duplicate/cull (§7); false: never refined
-  // Refine every view each time all views were seen this many more times. 3 measured best
-  // (docs/bench/issue17_ab.md, round 4): at the authors' 10 (--preset paper) a buffer first
-  // grows after 10 visits, while the static layer takes on the occluders' colours.
+  // Refine every view each time all views were seen this many more times. At the authors' 10
+  // (--preset paper) a buffer first grows after 10 visits, while the static layer takes on the
+  // occluders' colours (docs/METHOD.md §7).
   int refine_every_epochs = 3;
   bool regularize = true;       // the two opacity regularizers of §4
   float lambda_static = 0.01f;  // weight of mean(1 − A_s)
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
   // Weight of the distractor mask's total variation (train/mask_coherence.hpp; ours): a
   // transient object is one connected area, also where it matches the scene behind it.
-  // Counted only with `regularize`. 0.1 measured best (docs/bench/issue17_ab.md, round 3);
-  // 0 (off) in --preset paper.
+  // Counted only with `regularize`; 0 (off) in --preset paper.
   float lambda_mask_tv = 0.1f;
   // Weight of the occluder-colour prior (train/mask_coherence.hpp; ours): a transient object is
   // opaque and shows the photo's colour. Counted only with `regularize`, from step owned_after
-  // on (as the owned pull: from step 0 it cost 0.6 dB and 0.13 IoU on a 2,000-step run); 0
-  // (off) in --preset paper. 0.4 is half the L1 term's weight (1 − ssim_lambda), so fitting the
-  // photo always outweighs the prior; measured in docs/bench/issue17_ab.md, round 18.
+  // on, as the owned pull (before it the static layer has not had its chance); 0 (off) in
+  // --preset paper. 0.4 is half the L1 term's weight (1 − ssim_lambda), so fitting the photo
+  // always outweighs the prior.
   float lambda_occluder_colour = 0.4f;
 
   // Growth control (docs/METHOD.md §7, growth control); each rule is off at 0 / false, as in
-  // the authors' code (--preset paper). Defaults measured in docs/bench/issue17_ab.md.
+  // the authors' code (--preset paper).
   // A pixel is "explained" by a render when its mean |render − target| over RGB is below
   // explained_tolerance (in [0, 1] colour units).
   float explained_tolerance = 0.1f;
@@ -61,31 +61,26 @@ struct DistractorSettings {
   // neighbours, the composite explains it: there the distractor layer is the explanation, and
   // a transient object is opaque. Without it A_d stops at the least alpha that fits the colour
   // and masks stay partial (docs/METHOD.md §7). From step owned_after on: the static layer
-  // first gets its chance at what few views see (measured in docs/bench/issue17_ab.md, round 4).
+  // first gets its chance at what few views see.
   float lambda_owned = 0.2f;
   int owned_after = 3000;  // also when the occluder-colour prior starts
   // Growth cap: a refinement grows a view's buffer to at most (pixels the static layer left
   // unexplained in the view's latest step, as count_connected_misses counts them, at full
   // training resolution) /
-  // pixels_per_distractor, the highest gradients first. 0: unlimited. 6, not 4: once the
-  // summed-alpha limit and the opaque-pulling rules keep distractors from stacking, a third
-  // fewer fit as well on real occluders; 8 cost them 0.15 dB (docs/bench/issue17_ab.md, round 19).
+  // pixels_per_distractor, the highest gradients first. 0: unlimited.
   int pixels_per_distractor = 6;
   // What the cap, the starved test and the uncovered seeding count as the static layer's
   // unexplained pixels. false: every miss. true: only misses inside a connected area (the
   // 3×3 opening of the miss mask, ViewResidual::static_unexplained_in_areas), on the idea
-  // that thin and isolated misses are fitting error on edges and fine texture. Measured and
-  // not kept (docs/bench/issue17_ab.md, round 6): +0.54 dB on a clutter-free synthetic scene
-  // at 500×375, −0.40 dB on the clean fox over two seeds.
+  // that thin and isolated misses are fitting error on edges and fine texture. Off by default
+  // (docs/METHOD.md §7).
   bool count_connected_misses = false;
   // Split or duplicate by the angle a distractor subtends, as the static layer is judged at
   // the scene's depth: densify.size_threshold is a world size for Gaussians near the scene's
   // median depth D, so a distractor (at depth init_depth ρ, about 1/65 of D) is large above
   // size_threshold · ρ / D. With the world threshold no distractor is ever large (their
-  // scales are ~1e-4 against 0.01): every high-gradient one is duplicated at full size. Off:
-  // it cut the distractors' Gaussian–pixel pairs by 20–27 % on four scenes, but lost 0.44 and
-  // 0.39 dB on fox_occ100 at two seeds (docs/bench/issue17_ab.md, round 13). Needs sparse
-  // points (D); the world threshold without them.
+  // scales are far below it): every high-gradient one is duplicated at full size. Off by
+  // default (docs/METHOD.md §7). Needs sparse points (D); the world threshold without them.
   bool size_threshold_at_scene_depth = false;
   // A view whose buffer has fewer than one distractor per 256 pixels the static layer leaves
   // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
@@ -98,7 +93,7 @@ struct DistractorSettings {
   // Seeding (the starved and uncovered rules) waits for step seed_after, the first
   // resolution switch: before it the static layer still misses detail everywhere, and a seed
   // there takes a region the static layer would have fitted. 0: from the warm-up on (--preset
-  // fast and paper). Measured in docs/bench/issue17_ab.md, round 7.
+  // fast and paper).
   int seed_after = 3000;
   // Seeding also waits one refinement period after a static opacity reset, as after a
   // resolution switch: right after it the static layer is partly transparent everywhere.
@@ -111,9 +106,7 @@ struct DistractorSettings {
   // training resolution is culled. Such a distractor changes its photo's render by less than
   // this many pixels' worth of colour: hidden behind other distractors, nearly transparent or
   // off screen, it costs time and keeps the cap's room from Gaussians that are needed.
-  // 0: off, the default: at 1 px it held test PSNR and raised mask IoU on the occluded fox
-  // scenes but lost 0.18–0.46 dB and 0.03 IoU on the clutter benchmark at 500×375
-  // (docs/bench/issue17_ab.md, round 9).
+  // 0: off, the default (docs/METHOD.md §7).
   float min_blend_weight = 0.0f;
   // Summed-alpha limit on densification (docs/METHOD.md §7): a refinement duplicates or
   // splits a view's distractors only while their alpha summed over the image
@@ -122,8 +115,7 @@ struct DistractorSettings {
   // buffer's mean alpha per distractor. Layers whose α sum to s over a pixel leave it a
   // transmittance ≤ e^(−s): at ln 10 ≈ 2.3 it is ≥ 90 % covered, and past that a copy adds a
   // layer, not coverage. Seeding (the starved and uncovered rules) is not limited: it goes
-  // where no distractor covers. 2.3 measured best (docs/bench/issue17_ab.md, round 14); 0: off
-  // (--preset paper).
+  // where no distractor covers. 0: off (--preset paper).
   float max_alpha_sum = 2.3f;
 };
 

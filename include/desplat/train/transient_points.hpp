@@ -9,10 +9,9 @@
 #include <vector>
 
 #include "desplat/core/gaussians.hpp"
+#include "desplat/train/training_data.hpp"
 
 namespace desplat {
-
-struct TrainingData;
 
 enum class TransientPointAction {
   keep,  // every point starts a static Gaussian (the authors' behaviour)
@@ -24,8 +23,8 @@ std::string to_string(TransientPointAction action);
 TransientPointAction transient_point_action_from_string(const std::string& text);
 
 struct TransientPointSettings {
-  // drop measured best (docs/bench/issue17_ab.md, round 2); --preset paper keeps, and the
-  // Trainer keeps every point when distractors are off (the Splatfacto baseline).
+  // drop by default; --preset paper keeps, and the Trainer keeps every point when distractors
+  // are off (the Splatfacto baseline).
   TransientPointAction action = TransientPointAction::drop;
   // A point whose track holds fewer images than this is transient: an object that stays for
   // one or two photos is in only those photos' tracks.
@@ -36,8 +35,8 @@ struct TransientPointSettings {
   float color_tolerance = 0.25f;
   // Compare after each view's exposure and white balance (train/effects.hpp, view_gains): the
   // point's colour times the view's gain. Photos taken at different exposures disagree with a
-  // point's mean colour everywhere; without this a ±1-stop capture loses most of its points
-  // (docs/bench/issue17_ab.md, round 5). False: the colour as COLMAP stored it.
+  // point's mean colour everywhere; without this a capture of varied exposure loses most of its
+  // points. False: the colour as COLMAP stored it.
   bool per_view_gain = true;
 };
 
