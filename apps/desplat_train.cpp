@@ -6,6 +6,7 @@
 
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/train/presets.hpp"
+#include "desplat/train/train_config_json.hpp"
 #include "range_checks.hpp"
 #include "split_options.hpp"
 #include "stop_signal.hpp"
@@ -27,11 +28,8 @@ int main(int argc, char** argv) {
                  "the pixel in training and metrics (default: the scene's masks/ folder when it exists)");
   app.add_option("--out", o.out_dir, "output folder")->required();
   app.add_option("--config", o.config,
-                 "JSON file overriding training settings (see config.json of any run), or the JSON itself: "
-                 "--config '{\"num_downscales\": 0}'")
-      ->check(CLI::Validator(
-          [](const std::string& v) { return !v.empty() && v.front() == '{' ? std::string() : CLI::ExistingFile(v); },
-          "FILE|JSON"));
+                 "training settings as JSON (docs/CONFIG.md lists them): a file, the JSON itself "
+                 "(--config '{\"num_downscales\": 0}'), or a run's config.json (its \"train\" settings apply)");
   app.add_option("--preset", o.preset,
                  "starting settings: fast (a 3,000-step preview), default (what measures best, 30,000 steps) "
                  "or paper (the authors' exact behaviour); --config and --iterations apply on top. Default: default "
@@ -39,7 +37,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember(desplat::preset_names()));
   app.add_option("--iterations", o.iterations, "training steps (default 30000)")
       ->check(desplat::apps::integer_in(1, INT64_MAX));
-  app.add_option("--seed", o.seed, "random seed (default 0)");
+  app.add_option("--seed", o.seed, "random seed (default 0)")->check(desplat::apps::integer_in(0, INT64_MAX));
   app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(desplat::apps::integer_in(0, 4096));
   app.add_flag("--static-only", o.static_only,
                "static Gaussians only: the Splatfacto baseline (default: DeSplat, with per-view distractors)");
@@ -62,8 +60,17 @@ int main(int argc, char** argv) {
   app.add_flag("--overwrite", o.overwrite,
                "replace an earlier run's outputs in --out (config.json, checkpoint.ckpt, metrics.json, "
                "point_cloud.ply, renders/); without it such a folder is refused");
-  app.add_option("--downscale", o.downscale, "train on images downscaled by this factor (uses images_N/ if present)")
-      ->check(desplat::apps::integer_in(1, 64))->capture_default_str();
+  app.add_option("--downscale", o.downscale,
+                 "train on images downscaled by this factor (uses images_N/ if present; default 1, with --resume the "
+                 "model's)")
+      ->check(desplat::apps::integer_in(1, 64));
+  app.add_flag_callback(
+      "--print-settings-reference",
+      [] {
+        std::fputs(desplat::settings_reference_markdown().c_str(), stdout);
+        throw CLI::Success();
+      },
+      "print the reference of every training setting (docs/CONFIG.md) and exit");
   std::string split_rule = "every-nth";
   desplat::apps::add_split_options(app, o.split, split_rule);
   app.add_option("--eval-every", o.eval_every, "evaluate test views every N steps (0: only at the end)")

@@ -395,16 +395,16 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
     return testing::error_of<std::invalid_argument>([&] { config_from_json(j); });
   };
   EXPECT_CONTAINS(error({{"densify", {{"camera_path_radius", -0.1}}}}),
-                  "config: densify.camera_path_radius must be ≥ 0 (0 turns the rule off) (got -0.1)");
+                  "config: densify.camera_path_radius must be a number in [0, 10^18] (0 turns the rule off) (got -0.1)");
   EXPECT_CONTAINS(error({{"densify", {{"camera_path_max_segment", 0}}}}),
-                  "config: densify.camera_path_max_segment must be > 0 (got 0)");
+                  "config: densify.camera_path_max_segment must be a number in (0, 10^18] (got 0)");
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_radius", 0.05}}}}).densify.camera_path.radius, 0.05f);
   EXPECT_EQ(preset_config("paper").densify.camera_path.radius, 0.0f);
   EXPECT_EQ(preset_config("paper").densify.camera_path.blind_gap, 0.0f);
   EXPECT_EQ(preset_config("default").densify.camera_path.blind_gap, 0.5f);
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_blind_gap", 0.25}}}}).densify.camera_path.blind_gap, 0.25f);
   EXPECT_CONTAINS(error({{"densify", {{"camera_path_blind_gap", -1}}}}),
-                  "config: densify.camera_path_blind_gap must be ≥ 0 (0 turns the rule off) (got -1)");
+                  "config: densify.camera_path_blind_gap must be a number in [0, 10^18] (0 turns the rule off) (got -1)");
   EXPECT_EQ(preset_config("default").densify.camera_path.radius, 0.08f);
   EXPECT_FALSE(preset_config("default").densify.camera_path.by_extent);
   EXPECT_TRUE(config_from_json({{"densify", {{"camera_path_by_extent", true}}}}).densify.camera_path.by_extent);

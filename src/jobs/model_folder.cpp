@@ -25,6 +25,13 @@ json read_json_file(const fs::path& path, const std::string& what) {
   }
 }
 
+// A JSON library message without its "[json.exception.…] " tag.
+std::string plain(const json::exception& e) {
+  const std::string text = e.what();
+  const size_t tag_end = text.find("] ");
+  return tag_end == std::string::npos ? text : text.substr(tag_end + 2);
+}
+
 std::string join(const std::vector<std::string>& names) {
   std::string s;
   for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
@@ -123,7 +130,7 @@ SceneRecipe SceneRecipe::from_json(const json& j) {
     r.test_views = j.at("test_views").get<std::vector<std::string>>();
     r.masks_dir = j.value("masks_dir", std::string());
   } catch (const json::exception& e) {
-    throw std::invalid_argument(std::string("scene recipe: ") + e.what());
+    throw std::invalid_argument(std::string("the scene recipe is damaged (") + plain(e) + "): train the model again");
   } catch (const SplitError& e) {
     throw std::invalid_argument(std::string("scene recipe: ") + e.what());
   }
@@ -141,11 +148,23 @@ json ModelFolder::read_config_json() const { return read_json_file(config_path()
 
 ModelFolder::Config ModelFolder::read_config() const {
   const json j = read_config_json();
+  const std::string file = config_path().string();
+  const std::string what_to_do = "point at a folder desplat_train wrote, or train the model again";
+  if (!j.is_object())
+    throw std::invalid_argument(file + " is not a desplat config.json (its top level is " + j.type_name() +
+                                ", not an object): " + what_to_do);
+  if (!j.contains("train"))
+    throw std::invalid_argument(file + " has no \"train\" settings, so desplat_train did not write it: " + what_to_do);
+  if (!j.at("train").is_object())
+    throw std::invalid_argument(file + ": \"train\" must be an object of settings (it is " +
+                                j.at("train").type_name() + "): " + what_to_do);
   Config c;
   try {
     c.train = config_from_json(j.at("train"));
     c.unrecorded_settings = settings_absent_from(j.at("train"));
     c.run = j.value("run", json::object());
+    if (!c.run.is_object())
+      throw std::invalid_argument(std::string("\"run\" must be an object (it is ") + c.run.type_name() + "): " + what_to_do);
     if (j.contains("scene")) {
       c.scene = SceneRecipe::from_json(j.at("scene"));
       return c;
@@ -161,9 +180,9 @@ ModelFolder::Config ModelFolder::read_config() const {
     c.scene.split.rule = rule;
     if (rule == SplitRule::EveryNth) c.scene.split.every_nth = c.run.at("split_every_nth").get<int>();
   } catch (const json::exception& e) {
-    throw std::invalid_argument(config_path().string() + ": " + e.what());
+    throw std::invalid_argument(file + " holds a damaged record (" + plain(e) + "): " + what_to_do);
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(config_path().string() + ": " + e.what());
+    throw std::invalid_argument(file + ": " + e.what());
   }
   return c;
 }

@@ -11,7 +11,7 @@ TrainConfig preset_config(std::string_view name) {
   TrainConfig c;
   if (name == "default") return c;
   if (name == "fast") {
-    // A 3,000-step preview (docs/METHOD.md §7, presets; measured in docs/bench/issue16_speed.md).
+    // A 3,000-step preview (docs/METHOD.md §7, presets).
     c.iterations = 3000;
     c.resolution_schedule = 1000;  // a third of the run at each of 1/4, 1/2 and full resolution
     c.sh_degree_interval = 300;    // degree 3 by step 900, before full resolution, as the default by 3,000
@@ -22,8 +22,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.stop_screen_size_at = 1000;  // the coarse third only, as the default's 4,000 ends early
     c.densify.reset_alpha_every = 10;      // opacity resets at steps 1,000 and 2,000 (30 would never fire)
     c.distractors.owned_after = 1000;       // after the coarse third, as the default after its first level
-    // Seeding from the warm-up on: waiting for step 1,000 measured −0.41 dB on a clean scene
-    // and −0.83 dB on a cluttered one (docs/bench/issue17_ab.md, round 7).
+    // Seeding from the warm-up on: a run this short has no step to wait for.
     c.distractors.seed_after = 0;
     c.distractors.seed_waits_after_reset = false;
     return c;

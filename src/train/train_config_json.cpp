@@ -1,14 +1,17 @@
-// One table of (name, field) pairs drives both directions, so a new setting is added
-// in exactly one place.
+// TrainConfig ⇄ JSON, validation and comparison, all from the settings table
+// (settings_table.hpp): no setting's name or range is written here.
 #include "desplat/train/train_config_json.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <sstream>
+#include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <variant>
+
+#include "train/settings_table.hpp"
 
 namespace desplat {
 
@@ -29,126 +32,10 @@ void from_json(const nlohmann::json& j, KernelIsa& isa) {
 
 namespace {
 
-using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*,
-                           KernelIsa*>;
-struct Entry {
-  const char* name;
-  Field field;
-};
+using settings::Bounds;
+using settings::Setting;
 
-std::vector<Entry> fields(TrainConfig& c) {
-  return {
-      {"iterations", &c.iterations},
-      {"sh_degree", &c.sh_degree},
-      {"sh_degree_interval", &c.sh_degree_interval},
-      {"num_downscales", &c.num_downscales},
-      {"resolution_schedule", &c.resolution_schedule},
-      {"ssim_lambda", &c.ssim_lambda},
-      {"means_lr_final", &c.means_lr_final},
-      {"means_lr_decay_steps", &c.means_lr_decay_steps},
-      {"lr.means", &c.lr.means},
-      {"lr.log_scales", &c.lr.log_scales},
-      {"lr.quats", &c.lr.quats},
-      {"lr.opacity_logits", &c.lr.opacity_logits},
-      {"lr.sh_dc", &c.lr.colors_dc},
-      {"lr.sh_rest", &c.lr.colors_rest},
-      {"densify.enabled", &c.densify.enabled},
-      {"densify.warmup", &c.densify.warmup},
-      {"densify.refine_every", &c.densify.refine_every},
-      {"densify.reset_alpha_every", &c.densify.reset_alpha_every},
-      {"densify.stop_split_at", &c.densify.stop_split_at},
-      {"densify.stop_screen_size_at", &c.densify.stop_screen_size_at},
-      {"densify.grad_threshold", &c.densify.grad_threshold},
-      {"densify.size_threshold", &c.densify.size_threshold},
-      {"densify.split_screen_size", &c.densify.split_screen_size},
-      {"densify.split_samples", &c.densify.split_samples},
-      {"densify.split_scale_factor", &c.densify.split_scale_factor},
-      {"densify.cull_alpha", &c.densify.cull_alpha},
-      {"densify.cull_scale", &c.densify.cull_scale},
-      {"densify.cull_screen_size", &c.densify.cull_screen_size},
-      {"densify.normalize_each_step", &c.densify.stats.normalize_each_step},
-      {"densify.visible_count_from_one", &c.densify.stats.visible_count_from_one},
-      {"densify.radius_from_eigenvalue", &c.densify.stats.radius_from_eigenvalue},
-      {"densify.hide_behind_distractors", &c.densify.stats.hide_behind_distractors},
-      {"densify.gradient_per_seen_pixel", &c.densify.stats.gradient_per_seen_pixel},
-      {"densify.split_screen_needs_grad", &c.densify.split_screen_needs_grad},
-      {"densify.inherit_moments", &c.densify.inherit_moments},
-      {"densify.camera_path_radius", &c.densify.camera_path.radius},
-      {"densify.camera_path_max_segment", &c.densify.camera_path.max_segment},
-      {"densify.camera_path_by_extent", &c.densify.camera_path.by_extent},
-      {"densify.camera_path_blind_gap", &c.densify.camera_path.blind_gap},
-      {"distractors.enabled", &c.distractors.enabled},
-      {"distractors.initial_count", &c.distractors.initial_count},
-      {"distractors.reference_pixels", &c.distractors.reference_pixels},
-      {"distractors.init_depth", &c.distractors.init_depth},
-      {"distractors.init_half_width", &c.distractors.init_half_width},
-      {"distractors.init_opacity", &c.distractors.init_opacity},
-      {"distractors.lr.means", &c.distractors.lr.means},
-      {"distractors.lr.log_scales", &c.distractors.lr.log_scales},
-      {"distractors.lr.quats", &c.distractors.lr.quats},
-      {"distractors.lr.opacity_logits", &c.distractors.lr.opacity_logits},
-      {"distractors.lr.rgb", &c.distractors.lr.colors_dc},
-      {"distractors.density_control", &c.distractors.density_control},
-      {"distractors.refine_every_epochs", &c.distractors.refine_every_epochs},
-      {"distractors.regularize", &c.distractors.regularize},
-      {"distractors.lambda_static", &c.distractors.lambda_static},
-      {"distractors.lambda_distractor", &c.distractors.lambda_distractor},
-      {"distractors.lambda_mask_tv", &c.distractors.lambda_mask_tv},
-      {"distractors.lambda_occluder_colour", &c.distractors.lambda_occluder_colour},
-      {"distractors.explained_tolerance", &c.distractors.explained_tolerance},
-      {"distractors.lambda_explained", &c.distractors.lambda_explained},
-      {"distractors.lambda_owned", &c.distractors.lambda_owned},
-      {"distractors.pixels_per_distractor", &c.distractors.pixels_per_distractor},
-      {"distractors.count_connected_misses", &c.distractors.count_connected_misses},
-      {"distractors.size_threshold_at_scene_depth", &c.distractors.size_threshold_at_scene_depth},
-      {"distractors.reseed_starved_views", &c.distractors.reseed_starved_views},
-      {"distractors.seed_uncovered", &c.distractors.seed_uncovered},
-      {"distractors.seed_waits_after_reset", &c.distractors.seed_waits_after_reset},
-      {"distractors.grow_after", &c.distractors.grow_after},
-      {"distractors.owned_after", &c.distractors.owned_after},
-      {"distractors.seed_after", &c.distractors.seed_after},
-      {"distractors.min_blend_weight", &c.distractors.min_blend_weight},
-      {"distractors.max_alpha_sum", &c.distractors.max_alpha_sum},
-      {"appearance.enabled", &c.appearance.enabled},
-      {"appearance.image_dim", &c.appearance.image_dim},
-      {"appearance.fourier_frequencies", &c.appearance.fourier_frequencies},
-      {"appearance.hidden_width", &c.appearance.hidden_width},
-      {"appearance.hidden_layers", &c.appearance.hidden_layers},
-      {"appearance.lr.mlp", &c.appearance.lr_mlp},
-      {"appearance.lr.image_embeddings", &c.appearance.lr_image},
-      {"appearance.lr.gaussian_embeddings", &c.lr.features},
-      {"appearance.test_steps", &c.appearance.test_steps},
-      {"appearance.test_lr", &c.appearance.test_lr},
-      {"appearance.test_start_from_best_look", &c.appearance.test_start_from_best_look},
-      {"background.enabled", &c.background.enabled},
-      {"background.image_dim", &c.background.image_dim},
-      {"background.share_appearance_embedding", &c.background.share_appearance_embedding},
-      {"background.opaque_off_for_steady_sky", &c.background.opaque_off_for_steady_sky},
-      {"background.hidden_width", &c.background.hidden_width},
-      {"background.hidden_layers", &c.background.hidden_layers},
-      {"background.sh_degree", &c.background.sh_degree},
-      {"background.sh_degree_interval", &c.background.sh_degree_interval},
-      {"background.lr.mlp", &c.background.lr_mlp},
-      {"background.lr.sh_rest", &c.background.lr_rest},
-      {"background.lr.image_embeddings", &c.background.lr_image},
-      {"background.lambda_alpha", &c.background.lambda_alpha},
-      {"background.lambda_opaque", &c.background.lambda_opaque},
-      {"background.explained_error", &c.background.explained_error},
-      {"background.explained_share", &c.background.explained_share},
-      {"init.transient_points", &c.transient_points.action},
-      {"init.transient_min_track_images", &c.transient_points.min_track_images},
-      {"init.transient_color_tolerance", &c.transient_points.color_tolerance},
-      {"init.transient_per_view_gain", &c.transient_points.per_view_gain},
-      {"selective_adam", &c.selective_adam},
-      {"kernel_isa", &c.kernel_isa},
-      {"random_background", &c.random_background},
-      {"eval_background", &c.eval_background},
-      {"random_init_points", &c.random_init_points},
-      {"random_init_extent", &c.random_init_extent},
-      {"seed", &c.seed},
-      {"threads", &c.threads},
-  };
-}
+template <class T> constexpr bool kIsInteger = std::is_integral_v<T> && !std::is_same_v<T, bool>;
 
 nlohmann::json::json_pointer pointer(const std::string& dotted) {
   std::string p = "/" + dotted;
@@ -165,113 +52,150 @@ void collect_leaves(const nlohmann::json& j, const std::string& prefix, std::vec
   }
 }
 
-}  // namespace
-
-namespace {
-
-// `value` must be finite and in [lo, hi], or (lo, hi] when lo_open; else one error naming
-// the setting, what is allowed and what it got.
-void require(const char* name, double value, double lo, double hi, bool lo_open, const char* allowed) {
-  if (std::isfinite(value) && value >= lo && value <= hi && !(lo_open && value == lo)) return;
-  std::ostringstream got;
-  got << value;
-  throw std::invalid_argument(std::string("config: ") + name + " must be " + allowed + " (got " + got.str() + ")");
+// A range end as a reader writes it: 10^18 for the cap, integers in full.
+std::string show_end(double v) {
+  if (v == 1e18) return "10^18";
+  if (v >= 1.8446744073709552e19) return "18446744073709551615";
+  char text[40];
+  std::snprintf(text, sizeof text, "%.15g", v);
+  return text;
 }
 
-constexpr double kBig = 1e18;
+// [lo, hi] of a setting of type T: the table's bounds within what T holds.
+template <class T> std::pair<double, double> ends(const Bounds& b) {
+  if constexpr (kIsInteger<T>)
+    return {std::max(b.lo, double(std::numeric_limits<T>::lowest())), std::min(b.hi, double(std::numeric_limits<T>::max()))};
+  return {b.lo, b.hi};
+}
+
+// What a numeric setting of type T allows: "an integer in [1, 2147483647]", "a number in
+// (0, 10^18] (0 freezes the group)".
+template <class T> std::string allowed(const Bounds& b) {
+  const auto [lo, hi] = ends<T>(b);
+  std::string text = std::string(kIsInteger<T> ? "an integer in " : "a number in ") + (b.lo_open ? "(" : "[") +
+                     show_end(lo) + ", " + show_end(hi) + (b.hi_open ? ")" : "]");
+  if (b.note) text += std::string(" (") + b.note + ")";
+  return text;
+}
+
+// Throws "config: <name> must be <allowed> (got <got>)" unless `v` is finite, in the range
+// and (for an integer setting) whole.
+// `what` replaces the allowed range in the message (eval_background's "three numbers, each …").
+template <class T>
+void check_number(const char* name, const Bounds& b, long double v, const std::string& got, const std::string& what = "") {
+  // long double holds every 64-bit integer exactly: 10^18 + 1 is not 10^18.
+  long double lo = b.lo, hi = b.hi;
+  if constexpr (kIsInteger<T>) {
+    lo = std::max(lo, (long double)std::numeric_limits<T>::lowest());
+    hi = std::min(hi, (long double)std::numeric_limits<T>::max());
+  }
+  const bool ok = std::isfinite(v) && v >= lo && v <= hi && !(b.lo_open && v == lo) && !(b.hi_open && v == hi) &&
+                  (!kIsInteger<T> || v == std::floor(v));
+  if (!ok)
+    throw std::invalid_argument(std::string("config: ") + name + " must be " + (what.empty() ? allowed<T>(b) : what) +
+                                " (got " + got + ")");
+}
+
+std::string show_value(double v) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%g", v);
+  return text;
+}
+
+// The table's allowed values for `field` in words (docs/CONFIG.md's range column).
+std::string range_of(const Setting& s) {
+  return std::visit(
+      [&](auto* p) -> std::string {
+        using T = std::remove_pointer_t<decltype(p)>;
+        if constexpr (std::is_same_v<T, bool>) return "true or false";
+        else if constexpr (std::is_same_v<T, TransientPointAction>) return "keep, drop or seed";
+        else if constexpr (std::is_same_v<T, KernelIsa>) return "auto, portable, avx2 or avx512";
+        else if constexpr (std::is_same_v<T, std::array<float, 3>>) return "three numbers, each " + allowed<float>(s.bounds).substr(9);
+        else return allowed<T>(s.bounds);
+      },
+      s.field);
+}
+
+std::string type_of(const Setting& s) {
+  return std::visit(
+      [](auto* p) -> std::string {
+        using T = std::remove_pointer_t<decltype(p)>;
+        if constexpr (std::is_same_v<T, bool>) return "boolean";
+        else if constexpr (kIsInteger<T>) return "integer";
+        else if constexpr (std::is_same_v<T, float>) return "number";
+        else if constexpr (std::is_same_v<T, std::array<float, 3>>) return "[number, number, number]";
+        else return "string";
+      },
+      s.field);
+}
+
+// Reads one setting from its JSON value, range-checking the value as written (before any
+// conversion could wrap or round it).
+template <class T> void read_value(const Setting& s, const nlohmann::json& v, T& out) {
+  if constexpr (std::is_same_v<T, bool>) {
+    if (!v.is_boolean())
+      throw std::invalid_argument(std::string("config: ") + s.name + " must be true or false (got " + v.dump() + ")");
+    out = v.get<bool>();
+  } else if constexpr (std::is_same_v<T, std::array<float, 3>>) {
+    if (!v.is_array() || v.size() != 3 || !std::all_of(v.begin(), v.end(), [](const auto& e) { return e.is_number(); }))
+      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + range_of(s) + " (got " + v.dump() + ")");
+    for (size_t k = 0; k < 3; ++k) {
+      check_number<float>(s.name, s.bounds, v[k].get<double>(), v[k].dump(), range_of(s));
+      out[k] = v[k].get<float>();
+    }
+  } else if constexpr (std::is_arithmetic_v<T>) {
+    if (!v.is_number())
+      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + allowed<T>(s.bounds) + " (got " + v.dump() + ")");
+    const long double value = v.is_number_unsigned()  ? (long double)v.get<uint64_t>()
+                              : v.is_number_integer() ? (long double)v.get<int64_t>()
+                                                      : (long double)v.get<double>();
+    check_number<T>(s.name, s.bounds, value, v.dump());
+    if constexpr (kIsInteger<T>) out = v.is_number_float() ? static_cast<T>(v.get<double>()) : v.get<T>();
+    else out = v.get<T>();
+  } else {
+    out = v.get<T>();  // the enums' from_json above
+  }
+}
+
+// `j` with every old name (settings::aliases) moved to today's.
+nlohmann::json with_todays_names(const nlohmann::json& j) {
+  nlohmann::json out = j;
+  for (const settings::Alias& a : settings::aliases()) {
+    const auto old_ptr = pointer(a.old_name), new_ptr = pointer(a.name);
+    if (!out.contains(old_ptr)) continue;
+    if (out.contains(new_ptr))
+      throw std::invalid_argument(std::string("config: ") + a.old_name + " is the old name of " + a.name +
+                                  " and both are given: keep only " + a.name);
+    out[new_ptr] = out.at(old_ptr);
+    out.at(old_ptr.parent_pointer()).erase(old_ptr.back());
+  }
+  return out;
+}
 
 }  // namespace
 
 void validate_config(const TrainConfig& c) {
-  // Counts and intervals: several are divisors or moduli, so 0 would crash the run.
-  require("iterations", double(c.iterations), 1, kBig, false, "at least 1");
-  require("sh_degree", c.sh_degree, 0, 3, false, "0, 1, 2 or 3");
-  require("sh_degree_interval", c.sh_degree_interval, 1, kBig, false, "at least 1");
-  require("num_downscales", c.num_downscales, 0, 10, false, "0..10");
-  require("resolution_schedule", c.resolution_schedule, 1, kBig, false, "at least 1");
-  require("means_lr_decay_steps", double(c.means_lr_decay_steps), 1, kBig, false, "at least 1");
-  require("densify.warmup", c.densify.warmup, 0, kBig, false, "≥ 0");
-  require("densify.refine_every", c.densify.refine_every, 1, kBig, false, "at least 1");
-  require("densify.reset_alpha_every", c.densify.reset_alpha_every, 1, kBig, false, "at least 1");
-  require("densify.stop_split_at", c.densify.stop_split_at, 0, kBig, false, "≥ 0");
-  require("densify.stop_screen_size_at", c.densify.stop_screen_size_at, 0, kBig, false, "≥ 0");
-  require("densify.split_samples", c.densify.split_samples, 1, 64, false, "1..64");
-  require("distractors.initial_count", c.distractors.initial_count, 0, 1e7, false, "0..10,000,000");
-  require("distractors.reference_pixels", c.distractors.reference_pixels, 0, kBig, false, "≥ 0");
-  require("distractors.refine_every_epochs", c.distractors.refine_every_epochs, 1, kBig, false, "at least 1");
-  require("distractors.pixels_per_distractor", c.distractors.pixels_per_distractor, 0, kBig, false, "≥ 0");
-  require("distractors.grow_after", c.distractors.grow_after, 0, kBig, false, "≥ 0");
-  require("distractors.owned_after", c.distractors.owned_after, 0, kBig, false, "≥ 0");
-  require("distractors.seed_after", c.distractors.seed_after, 0, kBig, false, "≥ 0");
-  require("distractors.min_blend_weight", c.distractors.min_blend_weight, 0, kBig, false, "≥ 0");
-  require("distractors.max_alpha_sum", c.distractors.max_alpha_sum, 0, kBig, false, "≥ 0");
-  require("appearance.image_dim", c.appearance.image_dim, 1, 4096, false, "1..4096");
-  require("appearance.fourier_frequencies", c.appearance.fourier_frequencies, 1, 16, false, "1..16");
-  require("appearance.hidden_width", c.appearance.hidden_width, 1, 4096, false, "1..4096");
-  require("appearance.hidden_layers", c.appearance.hidden_layers, 1, 16, false, "1..16");
-  require("appearance.test_steps", c.appearance.test_steps, 1, 1e6, false, "1..1,000,000");
-  require("appearance.test_lr", c.appearance.test_lr, 0, kBig, true, "> 0");
-  require("background.image_dim", c.background.image_dim, 1, 4096, false, "1..4096");
-  require("background.hidden_width", c.background.hidden_width, 1, 4096, false, "1..4096");
-  require("background.hidden_layers", c.background.hidden_layers, 1, 16, false, "1..16");
-  require("background.sh_degree", c.background.sh_degree, 0, 4, false, "0..4");
-  require("background.sh_degree_interval", c.background.sh_degree_interval, 1, kBig, false, "at least 1");
-  require("background.lambda_alpha", c.background.lambda_alpha, 0, kBig, false, "≥ 0");
-  require("background.lambda_opaque", c.background.lambda_opaque, 0, kBig, false, "≥ 0");
-  require("background.explained_error", c.background.explained_error, 0, kBig, false, "≥ 0");
-  require("background.explained_share", c.background.explained_share, 0, 0.999999, false, "in [0, 1)");
-  require("init.transient_min_track_images", c.transient_points.min_track_images, 0, kBig, false, "≥ 0");
-  require("random_init_points", c.random_init_points, 1, 1e8, false, "1..100,000,000");
-  require("threads", c.threads, 0, 4096, false, "0 (all cores) or a positive count");
+  TrainConfig copy = c;
+  for (const Setting& s : settings::table(copy))
+    std::visit(
+        [&](auto* p) {
+          using T = std::remove_pointer_t<decltype(p)>;
+          if constexpr (std::is_same_v<T, std::array<float, 3>>) {
+            for (const float v : *p) check_number<float>(s.name, s.bounds, v, show_value(v), range_of(s));
+          } else if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+            check_number<T>(s.name, s.bounds, (long double)*p, kIsInteger<T> ? std::to_string(*p) : show_value(double(*p)));
+          }
+        },
+        s.field);
   if (!cpu_supports(c.kernel_isa))
     throw std::invalid_argument(std::string("config: kernel_isa ") + kernel_isa_name(c.kernel_isa) +
                                 " is not supported by this CPU (or this build); use auto");
-  // Rates: the means' rate decays on a log scale, so it and its final value must be > 0.
-  require("lr.means", c.lr.means, 0, kBig, true, "> 0");
-  require("means_lr_final", c.means_lr_final, 0, kBig, true, "> 0");
-  const std::pair<const char*, float> rates[] = {
-      {"lr.log_scales", c.lr.log_scales}, {"lr.quats", c.lr.quats}, {"lr.opacity_logits", c.lr.opacity_logits},
-      {"lr.sh_dc", c.lr.colors_dc}, {"lr.sh_rest", c.lr.colors_rest},
-      {"distractors.lr.means", c.distractors.lr.means}, {"distractors.lr.log_scales", c.distractors.lr.log_scales},
-      {"distractors.lr.quats", c.distractors.lr.quats},
-      {"distractors.lr.opacity_logits", c.distractors.lr.opacity_logits},
-      {"distractors.lr.rgb", c.distractors.lr.colors_dc},
-      {"appearance.lr.mlp", c.appearance.lr_mlp}, {"appearance.lr.image_embeddings", c.appearance.lr_image},
-      {"appearance.lr.gaussian_embeddings", c.lr.features},
-      {"background.lr.mlp", c.background.lr_mlp}, {"background.lr.sh_rest", c.background.lr_rest},
-      {"background.lr.image_embeddings", c.background.lr_image}};
-  for (const auto& [name, rate] : rates) require(name, rate, 0, kBig, false, "≥ 0 (0 freezes the group)");
-  // Weights, thresholds and sizes.
-  require("ssim_lambda", c.ssim_lambda, 0, 1, false, "in [0, 1]");
-  require("densify.grad_threshold", c.densify.grad_threshold, 0, kBig, true, "> 0");
-  require("densify.size_threshold", c.densify.size_threshold, 0, kBig, true, "> 0");
-  require("densify.split_screen_size", c.densify.split_screen_size, 0, kBig, true, "> 0");
-  require("densify.split_scale_factor", c.densify.split_scale_factor, 0, kBig, true, "> 0");
-  require("densify.cull_alpha", c.densify.cull_alpha, 0, 1, false, "in [0, 1]");
-  require("densify.cull_scale", c.densify.cull_scale, 0, kBig, true, "> 0");
-  require("densify.cull_screen_size", c.densify.cull_screen_size, 0, kBig, true, "> 0");
-  require("densify.camera_path_radius", c.densify.camera_path.radius, 0, kBig, false, "≥ 0 (0 turns the rule off)");
-  require("densify.camera_path_max_segment", c.densify.camera_path.max_segment, 0, kBig, true, "> 0");
-  require("densify.camera_path_blind_gap", c.densify.camera_path.blind_gap, 0, kBig, false, "≥ 0 (0 turns the rule off)");
-  require("distractors.init_depth", c.distractors.init_depth, 0, kBig, true, "> 0");
-  require("distractors.init_half_width", c.distractors.init_half_width, 0, kBig, true, "> 0");
-  require("distractors.init_opacity", c.distractors.init_opacity, 0, 0.999, true, "in (0, 0.999]");
-  require("distractors.lambda_static", c.distractors.lambda_static, 0, kBig, false, "≥ 0");
-  require("distractors.lambda_distractor", c.distractors.lambda_distractor, 0, kBig, false, "≥ 0");
-  require("distractors.lambda_mask_tv", c.distractors.lambda_mask_tv, 0, kBig, false, "≥ 0");
-  require("distractors.lambda_occluder_colour", c.distractors.lambda_occluder_colour, 0, kBig, false, "≥ 0");
-  require("distractors.explained_tolerance", c.distractors.explained_tolerance, 0, kBig, true, "> 0");
-  require("distractors.lambda_explained", c.distractors.lambda_explained, 0, kBig, false, "≥ 0");
-  require("distractors.lambda_owned", c.distractors.lambda_owned, 0, kBig, false, "≥ 0");
-  require("init.transient_color_tolerance", c.transient_points.color_tolerance, 0, kBig, false, "≥ 0");
-  require("random_init_extent", c.random_init_extent, 0, kBig, true, "> 0");
-  for (const float b : c.eval_background) require("eval_background", b, 0, 1, false, "three values in [0, 1]");
 }
 
 nlohmann::json config_to_json(const TrainConfig& c) {
   TrainConfig copy = c;
   nlohmann::json j = nlohmann::json::object();
-  for (const Entry& e : fields(copy)) std::visit([&](auto* p) { j[pointer(e.name)] = *p; }, e.field);
+  for (const Setting& s : settings::table(copy)) std::visit([&](auto* p) { j[pointer(s.name)] = *p; }, s.field);
   return j;
 }
 
@@ -287,44 +211,71 @@ std::vector<std::string> config_differences(const TrainConfig& a, const TrainCon
   };
   TrainConfig names_only;
   std::vector<std::string> out;
-  for (const Entry& e : fields(names_only)) {
-    if (std::find(ignore.begin(), ignore.end(), e.name) != ignore.end()) continue;
-    const auto ptr = pointer(e.name);
+  for (const Setting& s : settings::table(names_only)) {
+    if (std::find(ignore.begin(), ignore.end(), s.name) != ignore.end()) continue;
+    const auto ptr = pointer(s.name);
     if (ja.at(ptr) != jb.at(ptr))
-      out.push_back(std::string(e.name) + " " + show(ja.at(ptr)) + " (" + show(jb.at(ptr)) + " in " + b_name + ")");
+      out.push_back(std::string(s.name) + " " + show(ja.at(ptr)) + " (" + show(jb.at(ptr)) + " in " + b_name + ")");
   }
   return out;
 }
 
 std::vector<std::string> settings_absent_from(const nlohmann::json& j) {
+  const nlohmann::json named = j.is_object() ? with_todays_names(j) : nlohmann::json::object();
   TrainConfig names_only;
   std::vector<std::string> out;
-  for (const Entry& e : fields(names_only))
-    if (!j.is_object() || !j.contains(pointer(e.name))) out.push_back(e.name);
+  for (const Setting& s : settings::table(names_only))
+    if (!named.contains(pointer(s.name))) out.push_back(s.name);
   return out;
 }
 
 TrainConfig config_from_json(const nlohmann::json& j, TrainConfig base) {
   if (!j.is_object()) throw std::invalid_argument("config: the top level must be a JSON object");
+  const nlohmann::json named = with_todays_names(j);
   std::vector<std::string> leaves;
-  collect_leaves(j, "", leaves);
-  auto table = fields(base);
-  for (const std::string& key : leaves) {
-    bool known = false;
-    for (const Entry& e : table) known = known || key == e.name;
-    if (!known) throw std::invalid_argument("config: unknown setting '" + key + "'");
-  }
-  for (const Entry& e : table) {
-    const auto ptr = pointer(e.name);
-    if (!j.contains(ptr)) continue;
-    try {
-      std::visit([&](auto* p) { *p = j.at(ptr).get<std::remove_pointer_t<decltype(p)>>(); }, e.field);
-    } catch (const nlohmann::json::exception& ex) {
-      throw std::invalid_argument(std::string("config: setting '") + e.name + "' has the wrong type (" + ex.what() + ")");
-    }
+  collect_leaves(named, "", leaves);
+  const std::vector<Setting> table = settings::table(base);
+  for (const std::string& key : leaves)
+    if (std::none_of(table.begin(), table.end(), [&](const Setting& s) { return key == s.name; }))
+      throw std::invalid_argument("config: unknown setting '" + key + "' (docs/CONFIG.md lists every setting)");
+  for (const Setting& s : table) {
+    const auto ptr = pointer(s.name);
+    if (!named.contains(ptr)) continue;
+    std::visit([&](auto* p) { read_value(s, named.at(ptr), *p); }, s.field);
   }
   validate_config(base);
   return base;
+}
+
+std::vector<SettingDescription> describe_settings() {
+  TrainConfig defaults;
+  const nlohmann::json values = config_to_json(defaults);
+  std::vector<SettingDescription> out;
+  for (const Setting& s : settings::table(defaults)) {
+    const nlohmann::json& v = values.at(pointer(s.name));
+    std::string shown = v.dump();
+    if (v.is_number_float()) {
+      char text[32];
+      std::snprintf(text, sizeof text, "%.7g", v.get<double>());
+      shown = text;
+    } else if (v.is_array()) {
+      shown = "[";
+      for (size_t k = 0; k < v.size(); ++k) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%.7g", v[k].get<double>());
+        shown += (k ? ", " : "") + std::string(text);
+      }
+      shown += "]";
+    }
+    out.push_back({s.name, type_of(s), range_of(s), shown, s.meaning});
+  }
+  return out;
+}
+
+std::vector<std::pair<std::string, std::string>> old_setting_names() {
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const settings::Alias& a : settings::aliases()) out.emplace_back(a.old_name, a.name);
+  return out;
 }
 
 }  // namespace desplat

@@ -6,7 +6,6 @@
 #include <stdexcept>
 
 #include "desplat/train/effects.hpp"
-#include "desplat/train/trainer.hpp"
 
 namespace desplat {
 

@@ -21,7 +21,7 @@
 #include <string>
 
 #include "desplat/io/scene.hpp"
-#include "desplat/train/trainer.hpp"
+#include "desplat/train/training_data.hpp"
 
 namespace desplat {
 
@@ -32,8 +32,9 @@ struct TrainingRunOptions {
   // presets.hpp; the config file applies on top of it. Unset: "default" (on --resume: the
   // settings the model was trained with).
   std::optional<std::string> preset;
-  // JSON overrides of TrainConfig: a file's path, or the JSON text itself when it starts with '{'
-  // (desplat_train --config '{"num_downscales": 0}').
+  // JSON overrides of TrainConfig (docs/CONFIG.md): a file's path, or the JSON text itself when
+  // it starts with '{' (desplat_train --config '{"num_downscales": 0}'); a run's whole
+  // config.json is accepted (its "train" part applies; jobs/run_settings.hpp).
   std::string config;
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
@@ -56,7 +57,9 @@ struct TrainingRunOptions {
   // overwrite that model's checkpoint and leave its renders mixed with the new ones) unless
   // `overwrite`, which removes those outputs first.
   bool overwrite = false;
-  int downscale = 1;
+  // Train on images downscaled by this factor. Unset: 1, or on --resume the factor config.json
+  // records.
+  std::optional<int> downscale;
   SplitOptions split;
   std::filesystem::path masks_dir;  // the user's masks (masks.hpp); empty: <data>/masks if present
   int eval_every = 0;        // 0: only at the end
@@ -64,8 +67,11 @@ struct TrainingRunOptions {
   int log_every = 100;       // plain-log interval when stdout is not a terminal
 };
 
-// Returns the process exit code: 0 done, 130 interrupted (checkpoint written).
-// Throws for bad input (messages name the file and the problem).
+// Returns the process exit code: 0 done, 130 interrupted (checkpoint written, or nothing
+// written when interrupted before training started). Throws for bad input (messages name the
+// file or setting, the problem and what to do); every check of the settings and the inputs
+// runs before anything is written to out_dir (SfM on images_dir aside, which writes
+// out_dir/sfm), so a refused run leaves no outputs that would block the next one.
 int run_training(const TrainingRunOptions& options, const std::atomic<bool>& stop_requested);
 
 // Loads a scene and its pixels into TrainingData (normalized frame).

@@ -28,7 +28,8 @@ struct DistractorSettings {
   float init_opacity = 0.1f;
   // Rates of §6; colors_dc is the RGB rate (colors_rest is unused in RGB mode). The
   // means' rate decays with the same schedule as the static means'.
-  LearningRates lr{1.6e-4f, 5e-2f, 1e-2f, 5e-2f, 2.5e-2f, 0.0f};
+  LearningRates lr{.means = 1.6e-4f, .log_scales = 5e-2f, .quats = 1e-2f, .opacity_logits = 5e-2f, .colors_dc = 2.5e-2f,
+                   .colors_rest = 0.0f};
   bool density_control = true;  // per-view split/duplicate/cull (§7); false: never refined
   // Refine every view each time all views were seen this many more times. 3, not the
   // authors' 10 (--preset paper): at 10 a buffer first grows after 10 visits, while the static

@@ -7,7 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "desplat/train/trainer.hpp"
+#include "desplat/train/train_config.hpp"
+#include "desplat/train/training_data.hpp"
 
 namespace desplat {
 
@@ -29,8 +30,9 @@ struct Effects {
 // from the SfM tracks. Every track element of a training view is a sample: the photo's colour
 // at the point's projection against the point's own colour (COLMAP's mean over its track).
 // The appearance and background models are decided from this evidence, and only ever turned on.
-// Transients are not (colours along tracks did not tell them apart: docs/bench/issue15_effects.md);
-// transient_probe.hpp decides distractors.
+// Transients are not (colours along tracks do not tell them apart, docs/METHOD.md §10):
+// transient_probe.hpp decides distractors, and jobs/run_settings.hpp is where the choices are
+// made for a run.
 struct EffectsRules {
   // Appearance when the views' brightness gains (the median log₂ ratio of their samples, mean
   // over RGB) spread by more than this many stops (robust standard deviation over views), or

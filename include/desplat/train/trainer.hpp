@@ -27,78 +27,10 @@
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/trainable.hpp"
 #include "desplat/core/world_frame.hpp"
+#include "desplat/train/train_config.hpp"
+#include "desplat/train/training_data.hpp"
 
 namespace desplat {
-
-struct TrainView {
-  std::string name;
-  Camera camera;      // undistorted pinhole, normalized frame, full training resolution
-  ByteImage image;    // [H, W, 3] matching the camera, 8 bits per channel (core/image.hpp)
-  // Optional [H·W], the user's mask (docs/METHOD.md §4, masks): 1 = use the pixel, 0 = ignore
-  // it; empty = use every pixel. One byte per pixel, like the photo's channels: a float mask
-  // would take more memory than the photo. An ignored pixel leaves the loss, SSIM, the
-  // regularizers, the residual statistics, the densification statistics and the metrics; its
-  // image value is never read for training (the loader sets it to 0).
-  std::vector<uint8_t> keep;
-};
-
-struct TrainingData {
-  std::vector<TrainView> train, test;
-  std::vector<std::array<float, 3>> points;     // normalized frame
-  std::vector<std::array<uint8_t, 3>> colors;
-  // Optional, [points] or both empty: how many images each point's track holds, and which
-  // training views (indices into `train`) observe it (transient_points.hpp).
-  std::vector<uint32_t> point_track_images;
-  std::vector<std::vector<int32_t>> point_train_views;
-  WorldNormalization normalization;
-};
-
-struct TrainConfig {
-  int64_t iterations = 30000;
-  int sh_degree = 3;
-  int sh_degree_interval = 1000;  // active SH degree +1 every this many steps
-  int num_downscales = 2;         // train at 2^num_downscales lower resolution first …
-  int resolution_schedule = 3000; // … halving the factor every this many steps
-  float ssim_lambda = 0.2f;
-  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this …
-  int64_t means_lr_decay_steps = 30000;  // … over this many steps, whatever `iterations` is (Splatfacto)
-  LearningRates lr;
-  DensifySettings densify;
-  DistractorSettings distractors;
-  TransientPointSettings transient_points;  // what initialization does with transient sparse points
-  AppearanceSettings appearance;            // per-image appearance of the static layer (off: plain colours)
-  // The learned background behind both layers (background.hpp); when on it replaces the
-  // random training background and the static opacity regularizer λ_s (L_bg takes its place).
-  BackgroundSettings background;
-  // true: Adam updates only the Gaussians the step's view sees (their parameters and
-  // moments); one outside the view keeps them unchanged (docs/METHOD.md §6). false (the
-  // default and the authors'): every Gaussian every step; selective measured 0.04–0.10 dB
-  // lower on three scenes for a few percent of step time (docs/bench/issue16_speed.md).
-  bool selective_adam = false;
-  // The rasterizer's pixel-loop instruction set (raster.hpp); auto: the widest this CPU has.
-  // The paths differ only in float rounding (docs/METHOD.md §3).
-  KernelIsa kernel_isa = KernelIsa::Auto;
-  bool random_background = true;
-  std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
-  int random_init_points = 50000;  // used when the scene has no points
-  float random_init_extent = 1.0f; // half-width of the cube for random initialization
-  uint64_t seed = 0;
-  // 0: all cores. > 0 also becomes the calling thread's OpenMP default team size, so the
-  // optimizer, loss and initialization honour it as the rasterizer does.
-  int threads = 0;
-
-  // The resolution schedule, in one place: the factor step `step` trains at (1 = full
-  // training resolution), and the first step that trains at full resolution.
-  int downscale_at(int64_t step) const {
-    return 1 << std::max<int64_t>(num_downscales - step / resolution_schedule, 0);
-  }
-  int64_t full_resolution_from() const { return int64_t(num_downscales) * resolution_schedule; }
-  // The SH degree step `step` renders and trains with (one band more every
-  // sh_degree_interval steps); a finished model renders with the degree it ended at.
-  int sh_degree_at(int64_t step) const {
-    return static_cast<int>(std::min<int64_t>(step / sh_degree_interval, sh_degree));
-  }
-};
 
 // Seconds. forward/backward/optimizer are the static branch; `distractor` is all the
 // work of the view's distractor branch (its forward, backward, Adam and refinement);
@@ -164,7 +96,7 @@ struct ViewRefinement {
   int64_t before = 0, after = 0, budget = kUnlimitedGrowth;
   int64_t idle = 0;          // culled first by the idle cull (cull_idle_distractors)
   // The buffer's summed alpha before growth (distractor_alpha_sum, full training resolution
-  // [px]); measured only under distractors.max_alpha_sum, else 0.
+  // [px]); computed only under distractors.max_alpha_sum, else 0.
   double alpha_sum = 0;
   RefineReport report;
 };

@@ -9,10 +9,9 @@
 #include <vector>
 
 #include "desplat/core/gaussians.hpp"
+#include "desplat/train/training_data.hpp"
 
 namespace desplat {
-
-struct TrainingData;
 
 enum class TransientPointAction {
   keep,  // every point starts a static Gaussian (the authors' behaviour)
