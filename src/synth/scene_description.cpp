@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "desplat/synth/synth.hpp"
+#include "desplat/io/json_text.hpp"
 
 namespace desplat::synth {
 namespace {
@@ -288,7 +289,7 @@ json read_json_file(const fs::path& file) {
   std::ifstream in(file);
   if (!in) throw SynthError(file.string() + ": cannot read the scene description");
   try {
-    return json::parse(in, nullptr, true, /*ignore_comments=*/true);
+    return parse_json_bounded(in, file.string(), /*ignore_comments=*/true);
   } catch (const json::parse_error& e) {
     throw SynthError(file.string() + ": not valid JSON: " + e.what());
   }
