@@ -1,5 +1,7 @@
 // desplat_train's job: scene → trainer → progress, evaluation, checkpoints, outputs.
 #include "desplat/jobs/training_run.hpp"
+#include "desplat/io/json_text.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include "desplat/core/statistics.hpp"
 #include "desplat/core/stopwatch.hpp"
@@ -328,6 +330,7 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
 }  // namespace
 
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
+  check_output_folder("--out", opt.out_dir, {{"--data", opt.data_dir}, {"--images", opt.images_dir}, {"--masks", opt.masks_dir}});
   if (opt.resume && opt.overwrite) throw std::invalid_argument("--resume and --overwrite contradict each other");
   if (!opt.resume) {
     const ModelFolder earlier(opt.out_dir);
@@ -372,7 +375,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       text.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
     }
     try {
-      j = json::parse(text);
+      j = parse_json_bounded(text, source);
     } catch (const json::exception& e) {
       throw std::invalid_argument(source + " is not valid JSON: " + e.what());
     }

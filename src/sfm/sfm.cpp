@@ -1,5 +1,6 @@
 // Structure from motion by running the colmap executable; see include/desplat/sfm/sfm.hpp.
 #include "desplat/sfm/sfm.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include <OpenImageIO/imageio.h>
 #include <fcntl.h>
@@ -159,6 +160,11 @@ void prepare_output(const SfmOptions& o, const Layout& l, const std::vector<fs::
   if (is_inside(o.out, o.images))
     fail(SfmErrorKind::OutputExists, "--out " + in_quotes(o.out) + " is inside the images folder " +
                                          in_quotes(o.images) + "; choose an --out outside it");
+  try {
+    check_output_folder("--out", o.out, {{"--images", o.images}});
+  } catch (const std::invalid_argument& e) {
+    fail(SfmErrorKind::OutputExists, e.what());
+  }
   fs::create_directories(o.out, ec);
   if (ec || !fs::is_directory(o.out))
     fail(SfmErrorKind::OutputExists,

@@ -2,6 +2,7 @@
 // views of a capture and writing the result as a scene with ground-truth distractor masks.
 // See include/desplat/synth/occluders.hpp for what is written; the mask layout is masks.hpp's.
 #include "desplat/synth/occluders.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -413,6 +414,7 @@ OccludeReport occlude_scene(const OccludeOptions& o) {
   check_options(o);
   const fs::path data = fs::absolute(o.data_dir).lexically_normal();
   const fs::path out = fs::absolute(o.out_dir).lexically_normal();
+  check_output_folder("--out", o.out_dir, {{"--data", o.data_dir}});
   const Capture c = read_capture(data, o.split);
   check_output_place(data, out, o.overwrite);
 
