@@ -58,6 +58,10 @@ fs::path model_images_file(const fs::path& sparse) {
   return fs::exists(sparse / "cameras.bin") ? sparse / "images.bin" : sparse / "images.txt";
 }
 
+fs::path model_cameras_file(const fs::path& sparse) {
+  return fs::exists(sparse / "cameras.bin") ? sparse / "cameras.bin" : sparse / "cameras.txt";
+}
+
 struct Size {
   int width = 0, height = 0;
 };
@@ -95,6 +99,69 @@ WorldNormalization normalization_of(const colmap::Model& model) {
   n.center = {mean.x(), mean.y(), mean.z()};
   n.scale = extent > 0 ? 1.0 / extent : 1.0;  // one camera (or coincident ones): keep the scale
   return n;
+}
+
+// Every camera before any photo is read: positive, finite focal lengths and finite parameters.
+void check_cameras(const colmap::Model& model, const fs::path& sparse) {
+  for (const auto& [id, lens] : model.cameras) {
+    const std::string who = model_cameras_file(sparse).string() + ": camera " + std::to_string(id) + " (" +
+                            colmap::camera_model_info(lens.model).name + ")";
+    for (size_t k = 0; k < lens.params.size(); ++k)
+      if (!std::isfinite(lens.params[k]))
+        throw SceneError(who + ": parameter " + std::to_string(k) + " is not a finite number; fix the camera");
+    const PinholeIntrinsics K = pinhole_intrinsics(lens);
+    if (!(K.fx > 0) || !(K.fy > 0))
+      throw SceneError(who + ": focal length " + std::to_string(K.fx) + (K.fx == K.fy ? "" : ", " + std::to_string(K.fy)) +
+                       " px; a focal length must be positive (parameters: " +
+                       colmap::camera_model_info(lens.model).param_names + "); fix the camera");
+  }
+}
+
+// The poses must span a baseline and look at the sparse points: coincident cameras, or a
+// scene whose cameras see none of its points, cannot be reconstructed (docs/METHOD.md §4).
+void check_poses(const colmap::Model& model, const WorldNormalization& n, const fs::path& sparse) {
+  if (model.images.size() >= 2 && n.scale == 1.0) {
+    bool all_same = true;
+    const Eigen::Vector3d first = center_of(model.images.begin()->second);
+    for (const auto& [id, image] : model.images) all_same = all_same && center_of(image) == first;
+    if (all_same)
+      throw SceneError(model_images_file(sparse).string() + ": all " + std::to_string(model.images.size()) +
+                       " cameras sit at one position, so there is no baseline to reconstruct depth from; the poses "
+                       "are not a reconstruction (run desplat_sfm on the photos)");
+  }
+  if (model.points.empty()) return;
+  // Points that span a billionth of the cameras' spread are in other units than the poses: they
+  // would collapse to a pixel in every view.
+  double point_extent = 0;
+  for (const auto& [pid, point] : model.points)
+    for (int k = 0; k < 3; ++k)
+      point_extent = std::max(point_extent, std::abs(point.xyz[k] - n.center[k]));
+  if (n.scale != 1.0 && point_extent * n.scale < 1e-9)
+    throw SceneError(model_images_file(sparse).string() + ": the cameras spread over " +
+                     std::to_string(1.0 / n.scale) + " units but the sparse points only over " +
+                     std::to_string(point_extent) +
+                     ": the camera positions and the points are not in the same units (run desplat_sfm on the photos)");
+  size_t seen = 0;
+  for (const auto& [id, image] : model.images) {
+    const colmap::Camera& lens = model.cameras.at(image.camera_id);
+    const PinholeIntrinsics K = pinhole_intrinsics(lens);
+    const Eigen::Matrix3d R = rotation_of(image);
+    const Eigen::Vector3d t(image.tvec[0], image.tvec[1], image.tvec[2]);
+    for (const auto& [pid, point] : model.points) {
+      const Eigen::Vector3d x = R * Eigen::Vector3d(point.xyz[0], point.xyz[1], point.xyz[2]) + t;
+      if (!(x.z() > 0)) continue;
+      const double u = K.fx * x.x() / x.z() + K.cx, v = K.fy * x.y() / x.z() + K.cy;
+      if (u >= 0 && v >= 0 && u < double(lens.width) && v < double(lens.height)) {
+        ++seen;
+        break;
+      }
+    }
+    if (seen) return;
+  }
+  throw SceneError(model_images_file(sparse).string() + ": none of the " + std::to_string(model.images.size()) +
+                   " cameras sees any of the " + std::to_string(model.points.size()) +
+                   " sparse points in front of it and inside its image; the poses and the points do not belong "
+                   "together (run desplat_sfm on the photos)");
 }
 
 // The rasterizer's camera: intrinsics of the undistorted pinhole, pose in the normalized frame.
@@ -368,6 +435,8 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
   require_outside(scene.cache_dir, data);
   scene.on_warning = options.on_warning;
   scene.normalization = normalization_of(model);
+  check_cameras(model, sparse);
+  check_poses(model, scene.normalization, sparse);
 
   const std::vector<const colmap::Image*> images = sorted_by_name(model);
   std::vector<std::string> names;
@@ -410,6 +479,16 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     } catch (const std::invalid_argument& e) {
       throw SceneError(sparse.string() + ": camera " + std::to_string(lens.id) + ": " + e.what());
     }
+    // Clipped at the smallest undistorted size: the distortion folds the border back, which no
+    // real lens does.
+    if (double(v.undistorted_camera.width) <= options.undistort.min_scale * double(w) + 1 ||
+        double(v.undistorted_camera.height) <= options.undistort.min_scale * double(h) + 1)
+      throw SceneError(model_cameras_file(sparse).string() + ": camera " + std::to_string(lens.id) + " (" +
+                       colmap::camera_model_info(lens.model).name + "): its distortion coefficients bend the image "
+                       "border so far that undistorting keeps at most " +
+                       std::to_string(int(100 * options.undistort.min_scale)) +
+                       "% of each side; they are not a real lens's: check the camera's parameters (" +
+                       colmap::camera_model_info(lens.model).param_names + ")");
     v.camera = view_camera(image, v.undistorted_camera, scene.normalization);
     scene.views.push_back(std::move(v));
   }
