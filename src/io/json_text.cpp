@@ -10,9 +10,12 @@ namespace {
 // beyond the bound stops the parse before the deep part is built.
 template <class Input>
 nlohmann::json parse_with_bound(Input&& input, const std::string& source, bool ignore_comments) {
-  const nlohmann::json::parser_callback_t bound = [&source](int depth, nlohmann::json::parse_event_t,
+  // `depth` is that of the enclosing value: an array or object opened at depth d is level d + 1.
+  const nlohmann::json::parser_callback_t bound = [&source](int depth, nlohmann::json::parse_event_t event,
                                                             nlohmann::json&) {
-    if (depth > kMaxJsonDepth)
+    const bool opens = event == nlohmann::json::parse_event_t::object_start ||
+                       event == nlohmann::json::parse_event_t::array_start;
+    if (opens && depth >= kMaxJsonDepth)
       throw JsonTooDeep(source + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
                         " levels (arrays or objects inside one another); desplat's files nest a few levels, so "
                         "this is not one of them: check the file or text given");

@@ -132,11 +132,13 @@ void check_poses(const colmap::Model& model, const WorldNormalization& n, const 
   if (model.points.empty()) return;
   // Points that span a billionth of the cameras' spread are in other units than the poses: they
   // would collapse to a pixel in every view.
+  Eigen::Vector3d point_mean = Eigen::Vector3d::Zero();
+  for (const auto& [pid, point] : model.points) point_mean += Eigen::Vector3d(point.xyz[0], point.xyz[1], point.xyz[2]);
+  point_mean /= double(model.points.size());
   double point_extent = 0;
   for (const auto& [pid, point] : model.points)
-    for (int k = 0; k < 3; ++k)
-      point_extent = std::max(point_extent, std::abs(point.xyz[k] - n.center[k]));
-  if (n.scale != 1.0 && point_extent * n.scale < 1e-9)
+    for (int k = 0; k < 3; ++k) point_extent = std::max(point_extent, std::abs(point.xyz[k] - point_mean[k]));
+  if (model.points.size() >= 2 && n.scale != 1.0 && point_extent * n.scale < 1e-9)
     throw SceneError(model_images_file(sparse).string() + ": the cameras spread over " +
                      std::to_string(1.0 / n.scale) + " units but the sparse points only over " +
                      std::to_string(point_extent) +

@@ -286,10 +286,15 @@ Checkpoint make_training_checkpoint(const Trainer& t, const nlohmann::json& extr
 }
 
 GaussianSet gaussians_from_checkpoint(const Checkpoint& c) {
-  const int sh_degree = c.metadata.value("sh_degree", 0);
+  auto optional_int = [&](const char* key, int64_t hi) {
+    return c.metadata.contains(key) ? int(integer_field(c, c.metadata, key, key, 0, hi)) : 0;
+  };
+  const int sh_degree = optional_int("sh_degree", 3);
+  if (c.metadata.contains("color_mode") && !c.metadata.at("color_mode").is_string())
+    refuse(c, "metadata field 'color_mode' is " + c.metadata.at("color_mode").dump() + ", not \"rgb\" or \"sh\"");
   const ColorMode mode =
       c.metadata.value("color_mode", std::string("sh")) == "rgb" ? ColorMode::RGB : ColorMode::SphericalHarmonics;
-  return get_params(c, "static", mode, sh_degree, c.metadata.value("feature_dim", 0));
+  return get_params(c, "static", mode, sh_degree, optional_int("feature_dim", 1 << 16));
 }
 
 std::vector<std::string> appearance_views_in_checkpoint(const Checkpoint& c) { return view_names(c, "appearance"); }
@@ -323,7 +328,9 @@ BackgroundModel background_from_checkpoint(const Checkpoint& c) {
   s.hidden_layers = int(integer_field(c, m, "hidden_layers", "background.hidden_layers", 0, 1 << 16));
   s.sh_degree = int(integer_field(c, m, "sh_degree", "background.sh_degree", 0, 1 << 16));
   // Absent in models from before the option: those read their own embeddings.
-  s.share_appearance_embedding = m.value("shares_appearance_embedding", false);
+  s.share_appearance_embedding =
+      m.contains("shares_appearance_embedding") &&
+      bool_field(c, m, "shares_appearance_embedding", "background.shares_appearance_embedding");
   try {
     s.validate();
   } catch (const std::invalid_argument& e) {
@@ -344,7 +351,7 @@ GaussianSet distractors_from_checkpoint(const Checkpoint& c, size_t index) {
 void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   check_scene(trainer, c);
   TrainableGaussians& g = trainer.mutable_gaussians();
-  const int sh_degree = c.metadata.value("sh_degree", -1);
+  const int sh_degree = int(integer_field(c, c.metadata, "sh_degree", "sh_degree", 0, 3));
   if (sh_degree != g.params.sh_degree)
     throw CheckpointError(c.source.string() + ": checkpoint has SH degree " + std::to_string(sh_degree) +
                           " but the configuration asks for " + std::to_string(g.params.sh_degree));
@@ -432,7 +439,9 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
   for (size_t v = 0; v < views.size(); ++v) {
     get_trainable(c, distractor_prefix(v), distractors[v]);
     const nlohmann::json& d = c.metadata.at("distractors");
-    const std::string at = "[" + std::to_string(v) + "]";
+    std::string at(1, '[');
+    at += std::to_string(v);
+    at += ']';
     distractors[v].adam_step = integer_value(c, d.at("adam_step").at(v), "distractors.adam_step" + at, 0, step);
     distractors[v].statistics_empty = bool_value(c, d.at("statistics_empty").at(v), "distractors.statistics_empty" + at);
   }
