@@ -3,7 +3,7 @@
 // scene description: load_description) or "grid" (a desplat_bench grid: read_bench_grid).
 //
 // Contract checked: the reader returns or throws std::invalid_argument / std::runtime_error
-// (SynthError, JsonTooDeep and the JSON parse errors wrapped in them) with a message; anything
+// (SynthError, JsonTextError) with a message; anything
 // else (another exception, a crash, a sanitizer report, a stack overflow on deep nesting, a
 // hang) is a finding. A config that is accepted must survive its own JSON round trip.
 #include <cstdint>
@@ -44,12 +44,7 @@ Scratch& scratch() {
 }
 
 void read_config(const std::string& text) {
-  nlohmann::json j;
-  try {
-    j = parse_json_bounded(text, "--config text");
-  } catch (const nlohmann::json::parse_error&) {
-    return;  // not JSON: the caller names the source
-  }
+  const nlohmann::json j = parse_json_bounded(text, "--config text");
   const TrainConfig c = config_from_json(j, TrainConfig{});
   // Accepted: its own record reads back to the same settings.
   if (!config_differences(c, config_from_json(config_to_json(c), TrainConfig{}), "round trip").empty())

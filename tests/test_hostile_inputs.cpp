@@ -48,13 +48,15 @@ std::string nested_object(int levels) {
 
 TEST(HostileJson, NestingIsBoundedAtTheStatedDepth) {
   EXPECT_NO_THROW(parse_json_bounded(nested(kMaxJsonDepth), "x"));
-  EXPECT_CONTAINS(error_of<JsonTooDeep>([] { parse_json_bounded(nested(kMaxJsonDepth + 1), "the text"); }),
+  EXPECT_CONTAINS(error_of<JsonTextError>([] { parse_json_bounded(nested(kMaxJsonDepth + 1), "the text"); }),
                   "the text: JSON nested deeper than 256 levels");
   // Far past where walking it would overflow the stack.
-  EXPECT_CONTAINS(error_of<JsonTooDeep>([] { parse_json_bounded(nested_object(200000), "deep.json"); }),
+  EXPECT_CONTAINS(error_of<JsonTextError>([] { parse_json_bounded(nested_object(200000), "deep.json"); }),
                   "deep.json: JSON nested deeper");
-  // Malformed text is still nlohmann's parse error, for the caller to name the file.
-  EXPECT_THROW(parse_json_bounded("{\"a\": ", "x"), nlohmann::json::parse_error);
+  // Malformed text: the source and the place, without the library's exception prefix.
+  const std::string bad = error_of<JsonTextError>([] { parse_json_bounded("{\"a\": ", "grid.json"); });
+  EXPECT_CONTAINS(bad, "grid.json is not valid JSON: parse error at line 1, column 7: syntax error");
+  EXPECT_EQ(bad.find("json.exception"), std::string::npos) << bad;
 }
 
 TEST(HostileJson, EveryReaderRefusesDeepNesting) {
@@ -150,7 +152,7 @@ TEST(HostileScene, ZeroOrNegativeFocalLengthNamesTheCameraAndFile) {
     colmap::write_model_binary(s.model, c.data() / "sparse/0");
     const std::string e = c.load_error();
     EXPECT_CONTAINS(e, (c.data() / "sparse/0/cameras.bin").string() + ": camera 1 (PINHOLE): focal length");
-    EXPECT_CONTAINS(e, "must be positive");
+    EXPECT_CONTAINS(e, "must be a positive number of pixels");
   }
 }
 

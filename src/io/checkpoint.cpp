@@ -450,7 +450,7 @@ nlohmann::json read_metadata(Reader& r, const SectionHeader& h) {
   nlohmann::json meta;
   try {
     meta = parse_json_bounded(text, "metadata");
-  } catch (const JsonTooDeep& e) {
+  } catch (const JsonTextError& e) {
     r.fail(e.what());
   } catch (const nlohmann::json::exception& e) {
     r.fail(std::string("metadata is not valid JSON: ") + e.what());

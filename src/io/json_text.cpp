@@ -16,15 +16,25 @@ nlohmann::json parse_with_bound(Input&& input, const std::string& source, bool i
     const bool opens = event == nlohmann::json::parse_event_t::object_start ||
                        event == nlohmann::json::parse_event_t::array_start;
     if (opens && depth >= kMaxJsonDepth)
-      throw JsonTooDeep(source + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
+      throw JsonTextError(source + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
                         " levels (arrays or objects inside one another); desplat's files nest a few levels, so "
                         "this is not one of them: check the file or text given");
     return true;
   };
-  return nlohmann::json::parse(std::forward<Input>(input), bound, /*allow_exceptions=*/true, ignore_comments);
+  try {
+    return nlohmann::json::parse(std::forward<Input>(input), bound, /*allow_exceptions=*/true, ignore_comments);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw JsonTextError(source + " is not valid JSON: " + json_error_text(e));
+  }
 }
 
 }  // namespace
+
+std::string json_error_text(const nlohmann::json::exception& e) {
+  const std::string what = e.what();
+  const size_t end = what.find("] ");
+  return what.rfind("[json.exception.", 0) == 0 && end != std::string::npos ? what.substr(end + 2) : what;
+}
 
 nlohmann::json parse_json_bounded(std::string_view text, const std::string& source, bool ignore_comments) {
   return parse_with_bound(text, source, ignore_comments);

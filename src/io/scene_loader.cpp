@@ -109,22 +109,27 @@ void check_cameras(const colmap::Model& model, const fs::path& sparse) {
     for (size_t k = 0; k < lens.params.size(); ++k)
       if (!std::isfinite(lens.params[k]))
         throw SceneError(who + ": parameter " + std::to_string(k) + " is not a finite number; fix the camera");
+    // Positive as the rasterizer's float, too (1e-300 px would become 0 there).
     const PinholeIntrinsics K = pinhole_intrinsics(lens);
-    if (!(K.fx > 0) || !(K.fy > 0))
-      throw SceneError(who + ": focal length " + std::to_string(K.fx) + (K.fx == K.fy ? "" : ", " + std::to_string(K.fy)) +
-                       " px; a focal length must be positive (parameters: " +
+    const float fx = float(K.fx), fy = float(K.fy);
+    if (!(fx > 0) || !(fy > 0) || !std::isfinite(fx) || !std::isfinite(fy)) {
+      char focal[96];
+      std::snprintf(focal, sizeof focal, K.fx == K.fy ? "%g" : "%g, %g", K.fx, K.fy);
+      throw SceneError(who + ": focal length " + focal + " px; a focal length must be a positive number of pixels (" +
                        colmap::camera_model_info(lens.model).param_names + "); fix the camera");
+    }
   }
 }
 
 // The poses must span a baseline and look at the sparse points: coincident cameras, or a
 // scene whose cameras see none of its points, cannot be reconstructed (docs/METHOD.md §4).
 void check_poses(const colmap::Model& model, const WorldNormalization& n, const fs::path& sparse) {
-  if (model.images.size() >= 2 && n.scale == 1.0) {
-    bool all_same = true;
+  if (model.images.size() >= 2) {
+    // Coincident up to rounding: within a billionth of the positions' magnitude.
     const Eigen::Vector3d first = center_of(model.images.begin()->second);
-    for (const auto& [id, image] : model.images) all_same = all_same && center_of(image) == first;
-    if (all_same)
+    double spread = 0;
+    for (const auto& [id, image] : model.images) spread = std::max(spread, (center_of(image) - first).norm());
+    if (spread <= 1e-9 * (1.0 + first.norm()))
       throw SceneError(model_images_file(sparse).string() + ": all " + std::to_string(model.images.size()) +
                        " cameras sit at one position, so there is no baseline to reconstruct depth from; the poses "
                        "are not a reconstruction (run desplat_sfm on the photos)");
@@ -456,6 +461,7 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
   const Source source = choose_source(data, options, model_images_file(sparse), model, used, scene);
   const fs::path masks_dir = user_masks_dir(data, options);
   scene.masks_dir = masks_dir;
+  std::set<uint32_t> strongly_distorted;  // cameras warned about
   for (size_t i = 0; i < images.size(); ++i) {
     if (roles[i] == ViewRole::Unused) continue;
     const colmap::Image& image = *images[i];
@@ -481,6 +487,13 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     } catch (const std::invalid_argument& e) {
       throw SceneError(sparse.string() + ": camera " + std::to_string(lens.id) + ": " + e.what());
     }
+    if ((2 * v.undistorted_camera.width < w || 2 * v.undistorted_camera.height < h) &&
+        strongly_distorted.insert(lens.id).second)
+      report_warning(scene.on_warning,
+                     model_cameras_file(sparse).string() + ": camera " + std::to_string(lens.id) +
+                         ": undistorting it keeps only " + std::to_string(v.undistorted_camera.width) + "x" +
+                         std::to_string(v.undistorted_camera.height) + " of the " + std::to_string(w) + "x" +
+                         std::to_string(h) + " image; its distortion coefficients are unusually strong: check them");
     // Clipped at the smallest undistorted size: the distortion folds the border back, which no
     // real lens does.
     if (double(v.undistorted_camera.width) <= options.undistort.min_scale * double(w) + 1 ||

@@ -120,7 +120,7 @@ BenchGrid read_bench_grid(const fs::path& file) {
       }
     }
   } catch (const json::exception& e) {
-    fail("\"" + current + "\" has the wrong type (" + e.what() + ")");
+    fail("\"" + current + "\" has the wrong type (" + json_error_text(e) + ")");
   }
   if (g.scenes.empty()) fail("no scenes");
   if (g.runs.empty()) fail("no runs");

@@ -412,9 +412,9 @@ OccludedView write_view(const Capture& c, size_t i, const std::vector<size_t>& t
 
 OccludeReport occlude_scene(const OccludeOptions& o) {
   check_options(o);
+  check_output_folder("--out", o.out_dir, {{"--data", o.data_dir}});
   const fs::path data = fs::absolute(o.data_dir).lexically_normal();
   const fs::path out = fs::absolute(o.out_dir).lexically_normal();
-  check_output_folder("--out", o.out_dir, {{"--data", o.data_dir}});
   const Capture c = read_capture(data, o.split);
   check_output_place(data, out, o.overwrite);
 

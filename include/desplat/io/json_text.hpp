@@ -18,18 +18,23 @@ namespace desplat {
 
 inline constexpr int kMaxJsonDepth = 256;
 
-// The document nests deeper than kMaxJsonDepth. what() names the source, e.g.
-//   "config.json: JSON nested deeper than 256 levels (arrays or objects inside one another); ...".
-class JsonTooDeep : public std::invalid_argument {
+// The text is not JSON, or nests deeper than kMaxJsonDepth. what() names the source and the
+// problem without nlohmann's "[json.exception…]" prefix, e.g.
+//   "config.json is not valid JSON: parse error at line 1, column 3: syntax error …",
+//   "config.json: JSON nested deeper than 256 levels (arrays or objects inside one another); …".
+class JsonTextError : public std::invalid_argument {
  public:
   using std::invalid_argument::invalid_argument;
 };
 
 // Parses `text` (the whole document). `source` names it in errors ("config file a.json",
-// "--config text"). Throws JsonTooDeep as above, and nlohmann::json::parse_error for text that
-// is not JSON (callers add the source to that message themselves, as before).
+// "--config text"). Throws JsonTextError.
 nlohmann::json parse_json_bounded(std::string_view text, const std::string& source, bool ignore_comments = false);
 // The same for a whole stream (read to its end).
 nlohmann::json parse_json_bounded(std::istream& in, const std::string& source, bool ignore_comments = false);
+
+// A JSON library error's message without its "[json.exception.type_error.302] " prefix, for
+// messages that quote it ("type must be number, but is string").
+std::string json_error_text(const nlohmann::json::exception& e);
 
 }  // namespace desplat
