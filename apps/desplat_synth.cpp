@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 
+#include "desplat/io/output_folder.hpp"
 #include "desplat/synth/synth.hpp"
 
 namespace {
@@ -46,6 +47,7 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     };
   try {
+    desplat::check_output_folder("--out", options.out, {{"--scene", scene_file}});
     synth::Description d = synth::load_description(scene_file);
     if (seed) d = synth::apply_description(d, {{"seed", *seed}}, "--seed");
     const synth::GenerationReport r = synth::generate_scene(d, options);

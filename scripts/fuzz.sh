@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
-# Fuzzes the COLMAP binary readers and the 3DGS PLY reader with libFuzzer. CI runs it for 60 s
+# Fuzzes the COLMAP binary readers, the 3DGS PLY reader, the JSON readers (--config, scene
+# descriptions, bench grids) and the checkpoint restore with libFuzzer. CI runs it for 60 s
 # per harness as the ctest test fuzz_harnesses; run it longer by hand to search deeper. Builds a separate clang + ASan/UBSan tree in build/fuzz, seeds the
 # corpora with files written by the project (and the fox model's .bin files when
 # ../shared/data/fox/sparse/0 exists), then runs each harness for a bounded time, one at a
 # time (the machines have 2 cores).
 #
 # Usage: scripts/fuzz.sh [seconds per harness, default 120] [harness ...]
-#   harnesses: colmap_cameras colmap_images colmap_points3D ply (default: all four)
+#   harnesses: colmap_cameras colmap_images colmap_points3D ply json_config json_scene json_grid
+#              checkpoint_restore (default: all)
 # Environment: DESPLAT_FUZZ_MODEL=<COLMAP sparse dir> overrides the real-model seed source.
 #
 # Output, all under build/ (which git ignores); the data lives outside the build tree, so
@@ -24,7 +26,9 @@ seconds=${1:-120}
 [[ "$seconds" =~ ^[0-9]+$ ]] || { echo "usage: $0 [seconds per harness] [harness ...]" >&2; exit 2; }
 shift $(( $# > 0 ? 1 : 0 ))
 harnesses=("$@")
-[ ${#harnesses[@]} -gt 0 ] || harnesses=(colmap_cameras colmap_images colmap_points3D ply)
+all_harnesses="colmap_cameras colmap_images colmap_points3D ply json_config json_scene json_grid checkpoint_restore"
+# shellcheck disable=SC2206
+[ ${#harnesses[@]} -gt 0 ] || harnesses=($all_harnesses)
 
 build=build/fuzz
 data=build/fuzz-data
@@ -37,13 +41,17 @@ max_len() {  # bytes per input: room for realistic small files, small enough to 
   esac
 }
 
-seed_dir_of() {  # harness -> directory of make_seeds' output
+seed_dir_of() {  # harness -> its seed folder (make_seeds' output, or files kept in the repository)
   case "$1" in
-    colmap_cameras) echo cameras ;;
-    colmap_images) echo images ;;
-    colmap_points3D) echo points3D ;;
-    ply) echo ply ;;
-    *) echo "unknown harness '$1' (known: colmap_cameras colmap_images colmap_points3D ply)" >&2; exit 2 ;;
+    colmap_cameras) echo "$data/seeds/cameras" ;;
+    colmap_images) echo "$data/seeds/images" ;;
+    colmap_points3D) echo "$data/seeds/points3D" ;;
+    ply) echo "$data/seeds/ply" ;;
+    json_config) echo fuzz/seeds/config ;;
+    json_scene) echo data/synthetic ;;
+    json_grid) echo data/bench ;;
+    checkpoint_restore) echo fuzz/seeds/checkpoint ;;
+    *) echo "unknown harness '$1' (known: $all_harnesses)" >&2; exit 2 ;;
   esac
 }
 for h in "${harnesses[@]}"; do seed_dir_of "$h" >/dev/null; done
@@ -80,7 +88,7 @@ for h in "${harnesses[@]}"; do
   set +e
   "$build/fuzz/fuzz_$h" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
     -max_len="$(max_len "$h")" -print_final_stats=1 -artifact_prefix="$findings/" \
-    "$corpus" "$seeds/$(seed_dir_of "$h")" >"$log" 2>&1
+    "$corpus" "$(seed_dir_of "$h")" >"$log" 2>&1
   rc=$?
   set -e
   stats=$(grep -E '^#[0-9]+[[:space:]]+(DONE|INITED)' "$log" | tail -1 |

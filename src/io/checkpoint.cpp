@@ -1,6 +1,7 @@
 // Checkpoint container (see include/desplat/io/checkpoint.hpp for the file format) and the
 // CRC-32 it uses (src/io/crc32.hpp).
 #include "desplat/io/checkpoint.hpp"
+#include "desplat/io/json_text.hpp"
 
 #include <array>
 #include <bit>
@@ -448,7 +449,9 @@ nlohmann::json read_metadata(Reader& r, const SectionHeader& h) {
   read_payload(r, h, text.data());
   nlohmann::json meta;
   try {
-    meta = nlohmann::json::parse(text);
+    meta = parse_json_bounded(text, "metadata");
+  } catch (const JsonTextError& e) {
+    r.fail(e.what());
   } catch (const nlohmann::json::exception& e) {
     r.fail(std::string("metadata is not valid JSON: ") + e.what());
   }

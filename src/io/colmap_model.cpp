@@ -12,6 +12,8 @@
 #include <sstream>
 #include <unordered_map>
 
+#include <nlohmann/json.hpp>
+
 namespace desplat::colmap {
 
 namespace fs = std::filesystem;
@@ -75,6 +77,29 @@ void check_image_references(const Model& model, const ModelPaths& paths) {
     if (!fresh)
       throw ColmapError(file_prefix(paths.images) + "duplicate image name '" + image.name +
                         "' (images " + num(it->second) + " and " + num(id) + ")");
+  }
+  // Names go into JSON records (config.json, checkpoints, metrics), which hold UTF-8 only.
+  for (const auto& [id, image] : model.images) {
+    try {
+      (void)nlohmann::json(image.name).dump();
+    } catch (const nlohmann::json::type_error&) {
+      std::string shown;
+      for (const unsigned char ch : image.name)
+        shown += ch >= 0x20 && ch < 0x7f ? std::string(1, char(ch)) : "\\x" + std::string(1, "0123456789abcdef"[ch >> 4]) +
+                                                                  std::string(1, "0123456789abcdef"[ch & 15]);
+      throw ColmapError(file_prefix(paths.images) + "image " + num(id) + ": its name '" + shown +
+                        "' is not UTF-8 text (e.g. Latin-1); rename the photo and its entry to UTF-8");
+    }
+  }
+  // Two spellings of one file ("./a.jpg" and "a.jpg") would train one photo under two poses.
+  std::unordered_map<std::string, uint32_t> by_file;
+  for (const auto& [id, image] : model.images) {
+    const std::string file = fs::path(image.name).lexically_normal().generic_string();
+    const auto [it, fresh] = by_file.emplace(file, id);
+    if (!fresh)
+      throw ColmapError(file_prefix(paths.images) + "images " + num(it->second) + " ('" +
+                        model.images.at(it->second).name + "') and " + num(id) + " ('" + image.name +
+                        "') name the same file " + file + ": one photo cannot have two poses; remove one of them");
   }
 }
 

@@ -58,6 +58,10 @@ fs::path model_images_file(const fs::path& sparse) {
   return fs::exists(sparse / "cameras.bin") ? sparse / "images.bin" : sparse / "images.txt";
 }
 
+fs::path model_cameras_file(const fs::path& sparse) {
+  return fs::exists(sparse / "cameras.bin") ? sparse / "cameras.bin" : sparse / "cameras.txt";
+}
+
 struct Size {
   int width = 0, height = 0;
 };
@@ -97,6 +101,76 @@ WorldNormalization normalization_of(const colmap::Model& model) {
   n.center = {mean.x(), mean.y(), mean.z()};
   n.scale = extent > 0 ? 1.0 / extent : 1.0;  // one camera (or coincident ones): keep the scale
   return n;
+}
+
+// Every camera before any photo is read: positive, finite focal lengths and finite parameters.
+void check_cameras(const colmap::Model& model, const fs::path& sparse) {
+  for (const auto& [id, lens] : model.cameras) {
+    const std::string who = model_cameras_file(sparse).string() + ": camera " + std::to_string(id) + " (" +
+                            colmap::camera_model_info(lens.model).name + ")";
+    for (size_t k = 0; k < lens.params.size(); ++k)
+      if (!std::isfinite(lens.params[k]))
+        throw SceneError(who + ": parameter " + std::to_string(k) + " is not a finite number; fix the camera");
+    // Positive as the rasterizer's float, too (1e-300 px would become 0 there).
+    const PinholeIntrinsics K = pinhole_intrinsics(lens);
+    const float fx = float(K.fx), fy = float(K.fy);
+    if (!(fx > 0) || !(fy > 0) || !std::isfinite(fx) || !std::isfinite(fy)) {
+      char focal[96];
+      std::snprintf(focal, sizeof focal, K.fx == K.fy ? "%g" : "%g, %g", K.fx, K.fy);
+      throw SceneError(who + ": focal length " + focal + " px; a focal length must be a positive number of pixels (" +
+                       colmap::camera_model_info(lens.model).param_names + "); fix the camera");
+    }
+  }
+}
+
+// The poses must span a baseline and look at the sparse points: coincident cameras, or a
+// scene whose cameras see none of its points, cannot be reconstructed (docs/METHOD.md §4).
+void check_poses(const colmap::Model& model, const WorldNormalization& n, const fs::path& sparse) {
+  if (model.images.size() >= 2) {
+    // Coincident up to rounding: within a billionth of the positions' magnitude.
+    const Eigen::Vector3d first = center_of(model.images.begin()->second);
+    double spread = 0;
+    for (const auto& [id, image] : model.images) spread = std::max(spread, (center_of(image) - first).norm());
+    if (spread <= 1e-9 * (1.0 + first.norm()))
+      throw SceneError(model_images_file(sparse).string() + ": all " + std::to_string(model.images.size()) +
+                       " cameras sit at one position, so there is no baseline to reconstruct depth from; the poses "
+                       "are not a reconstruction (run desplat_sfm on the photos)");
+  }
+  if (model.points.empty()) return;
+  // Points that span a billionth of the cameras' spread are in other units than the poses: they
+  // would collapse to a pixel in every view.
+  Eigen::Vector3d point_mean = Eigen::Vector3d::Zero();
+  for (const auto& [pid, point] : model.points) point_mean += Eigen::Vector3d(point.xyz[0], point.xyz[1], point.xyz[2]);
+  point_mean /= double(model.points.size());
+  double point_extent = 0;
+  for (const auto& [pid, point] : model.points)
+    for (int k = 0; k < 3; ++k) point_extent = std::max(point_extent, std::abs(point.xyz[k] - point_mean[k]));
+  if (model.points.size() >= 2 && n.scale != 1.0 && point_extent * n.scale < 1e-9)
+    throw SceneError(model_images_file(sparse).string() + ": the cameras spread over " +
+                     std::to_string(1.0 / n.scale) + " units but the sparse points only over " +
+                     std::to_string(point_extent) +
+                     ": the camera positions and the points are not in the same units (run desplat_sfm on the photos)");
+  size_t seen = 0;
+  for (const auto& [id, image] : model.images) {
+    const colmap::Camera& lens = model.cameras.at(image.camera_id);
+    const PinholeIntrinsics K = pinhole_intrinsics(lens);
+    const Eigen::Matrix3d R = rotation_of(image);
+    const Eigen::Vector3d t(image.tvec[0], image.tvec[1], image.tvec[2]);
+    for (const auto& [pid, point] : model.points) {
+      const Eigen::Vector3d x = R * Eigen::Vector3d(point.xyz[0], point.xyz[1], point.xyz[2]) + t;
+      if (!(x.z() > 0)) continue;
+      const double u = K.fx * x.x() / x.z() + K.cx, v = K.fy * x.y() / x.z() + K.cy;
+      if (u >= 0 && v >= 0 && u < double(lens.width) && v < double(lens.height)) {
+        ++seen;
+        break;
+      }
+    }
+    if (seen) return;
+  }
+  throw SceneError(model_images_file(sparse).string() + ": none of the " + std::to_string(model.images.size()) +
+                   " cameras sees any of the " + std::to_string(model.points.size()) +
+                   " sparse points in front of it and inside its image; the poses and the points do not belong "
+                   "together (run desplat_sfm on the photos)");
 }
 
 // The rasterizer's camera: intrinsics of the undistorted pinhole, pose in the normalized frame.
@@ -370,6 +444,8 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
   require_outside(scene.cache_dir, data);
   scene.on_warning = options.on_warning;
   scene.normalization = normalization_of(model);
+  check_cameras(model, sparse);
+  check_poses(model, scene.normalization, sparse);
 
   const std::vector<const colmap::Image*> images = sorted_by_name(model);
   std::vector<std::string> names;
@@ -387,6 +463,7 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
   const Source source = choose_source(data, options, model_images_file(sparse), model, used, scene);
   const fs::path masks_dir = user_masks_dir(data, options);
   scene.masks_dir = masks_dir;
+  std::set<uint32_t> strongly_distorted;  // cameras warned about
   for (size_t i = 0; i < images.size(); ++i) {
     if (roles[i] == ViewRole::Unused) continue;
     const colmap::Image& image = *images[i];
@@ -412,6 +489,23 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     } catch (const std::invalid_argument& e) {
       throw SceneError(sparse.string() + ": camera " + std::to_string(lens.id) + ": " + e.what());
     }
+    if ((2 * v.undistorted_camera.width < w || 2 * v.undistorted_camera.height < h) &&
+        strongly_distorted.insert(lens.id).second)
+      report_warning(scene.on_warning,
+                     model_cameras_file(sparse).string() + ": camera " + std::to_string(lens.id) +
+                         ": undistorting it keeps only " + std::to_string(v.undistorted_camera.width) + "x" +
+                         std::to_string(v.undistorted_camera.height) + " of the " + std::to_string(w) + "x" +
+                         std::to_string(h) + " image; its distortion coefficients are unusually strong: check them");
+    // Clipped at the smallest undistorted size: the distortion folds the border back, which no
+    // real lens does.
+    if (double(v.undistorted_camera.width) <= options.undistort.min_scale * double(w) + 1 ||
+        double(v.undistorted_camera.height) <= options.undistort.min_scale * double(h) + 1)
+      throw SceneError(model_cameras_file(sparse).string() + ": camera " + std::to_string(lens.id) + " (" +
+                       colmap::camera_model_info(lens.model).name + "): its distortion coefficients bend the image "
+                       "border so far that undistorting keeps at most " +
+                       std::to_string(int(100 * options.undistort.min_scale)) +
+                       "% of each side; they are not a real lens's: check the camera's parameters (" +
+                       colmap::camera_model_info(lens.model).param_names + ")");
     v.camera = view_camera(image, v.undistorted_camera, scene.normalization);
     scene.views.push_back(std::move(v));
   }

@@ -1,4 +1,6 @@
 #include "desplat/jobs/bench_run.hpp"
+#include "desplat/io/output_folder.hpp"
+#include "desplat/io/json_text.hpp"
 
 #include "desplat/core/stopwatch.hpp"
 
@@ -35,7 +37,7 @@ double scene_clutter_ratio(const fs::path& scene) {
   std::ifstream f(scene / "scene.json");
   if (!f) return -1;
   try {
-    const json j = json::parse(f);
+    const json j = parse_json_bounded(f, (scene / "scene.json").string());
     return j.at("distractors").at("clutter_ratio").get<double>();
   } catch (const json::exception&) {
     return -1;
@@ -74,16 +76,19 @@ BenchGrid read_bench_grid(const fs::path& file) {
   if (!f) throw std::invalid_argument("cannot read benchmark grid " + file.string());
   json j;
   try {
-    j = json::parse(f, nullptr, true, /*ignore_comments=*/true);
+    j = parse_json_bounded(f, file.string(), /*ignore_comments=*/true);
   } catch (const json::exception& e) {
     throw std::invalid_argument(file.string() + " is not valid JSON: " + e.what());
   }
   auto fail = [&](const std::string& what) { throw std::invalid_argument(file.string() + ": " + what); };
   if (!j.is_object()) fail("expected a JSON object");
   BenchGrid g;
+  std::string current;  // the setting being read, for a wrong type's message
   try {
     for (const auto& [key, value] : j.items()) {
+      current = key;
       if (key == "scenes") {
+        if (!value.is_array()) fail("\"scenes\" must be a list of scene folders, e.g. [\"out/bench\"]");
         for (const json& s : value) g.scenes.push_back(fs::absolute(file).parent_path() / s.get<std::string>());
       } else if (key == "steps") {
         g.steps = value.get<int64_t>();
@@ -96,7 +101,10 @@ BenchGrid read_bench_grid(const fs::path& file) {
         if (where != "full" && where != "training") fail("score_at must be \"full\" or \"training\"");
         g.score_at_full_resolution = where == "full";
       } else if (key == "runs") {
+        if (!value.is_array()) fail("\"runs\" must be a list of runs, e.g. [{\"name\": \"default\"}]");
         for (const json& r : value) {
+          if (!r.is_object())
+            fail("each entry of \"runs\" must be an object such as {\"name\": \"default\"}, not " + r.dump());
           BenchRun run;
           for (const auto& [rk, rv] : r.items()) {
             if (rk == "name") run.name = rv.get<std::string>();
@@ -112,7 +120,7 @@ BenchGrid read_bench_grid(const fs::path& file) {
       }
     }
   } catch (const json::exception& e) {
-    fail(std::string("wrong type: ") + e.what());
+    fail("\"" + current + "\" has the wrong type (" + json_error_text(e) + ")");
   }
   if (g.scenes.empty()) fail("no scenes");
   if (g.runs.empty()) fail("no runs");
@@ -172,6 +180,7 @@ std::vector<BenchPoint> read_bench_csv(const fs::path& path) {
 std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir, bool resume,
                                   const std::atomic<bool>& stop_requested,
                                   const std::function<void(const BenchPoint&)>& report) {
+  for (const fs::path& scene : grid.scenes) check_output_folder("--out", out_dir, {{"the grid's scene", scene}});
   fs::create_directories(out_dir);
   const fs::path csv = out_dir / "bench.csv";
   std::vector<BenchPoint> points;

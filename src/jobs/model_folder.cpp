@@ -1,5 +1,6 @@
 // A trained model's folder: config.json (with the scene recipe), checkpoint, metrics.
 #include "desplat/jobs/model_folder.hpp"
+#include "desplat/io/json_text.hpp"
 
 #include <algorithm>
 #include <fstream>
@@ -19,7 +20,7 @@ json read_json_file(const fs::path& path, const std::string& what) {
   std::ifstream f(path);
   if (!f) throw std::invalid_argument(what + ": cannot read " + path.string());
   try {
-    return json::parse(f);
+    return parse_json_bounded(f, path.string());
   } catch (const json::exception& e) {
     throw std::invalid_argument(path.string() + " is not valid JSON: " + e.what());
   }

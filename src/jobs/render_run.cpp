@@ -1,6 +1,7 @@
 // Re-rendering a saved model: the scene (cameras only) is loaded again from the data
 // folder recorded in the model's config.json; the Gaussians come from its checkpoint.
 #include "desplat/jobs/render_run.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include "desplat/jobs/model_folder.hpp"
 
@@ -37,7 +38,7 @@ FloatImage with_alpha(const FloatImage& rgb_over_black, const FloatImage& alpha)
   return out;
 }
 
-std::vector<size_t> choose_views(const Scene& scene, const std::string& views, const std::string& data_dir) {
+std::vector<size_t> listed_views(const Scene& scene, const std::string& views, const std::string& data_dir) {
   std::vector<size_t> chosen;
   if (views == "test") return scene.test_views();
   if (views == "train") return scene.train_views();
@@ -56,6 +57,17 @@ std::vector<size_t> choose_views(const Scene& scene, const std::string& views, c
   return chosen;
 }
 
+// The views --views names; refused when that is none (an empty list, or a split without them).
+std::vector<size_t> choose_views(const Scene& scene, const std::string& views, const std::string& data_dir) {
+  std::vector<size_t> chosen = listed_views(scene, views, data_dir);
+  if (chosen.empty())
+    throw std::invalid_argument("--views '" + views + "' selects no view of the model's scene " + data_dir + " (" +
+                                std::to_string(scene.train_views().size()) + " training and " +
+                                std::to_string(scene.test_views().size()) +
+                                " test views): give test, train, all or image names separated by commas");
+  return chosen;
+}
+
 }  // namespace
 
 int run_render(const RenderRunOptions& o) {
@@ -65,6 +77,7 @@ int run_render(const RenderRunOptions& o) {
   const ModelFolder::Config config = model.read_config();
   const TrainConfig& train = config.train;
   const std::string data_dir = config.scene.data_dir.string();
+  check_output_folder("--out", o.out_dir, {{"--model", o.model_dir, true}, {"the model's data folder", data_dir}});
   const Scene scene = load_colmap_scene(data_dir, config.scene.reopen_options());
   const Checkpoint ckpt = model.read_checkpoint();
   const GaussianSet statics = gaussians_from_checkpoint(ckpt);

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "desplat/core/stopwatch.hpp"
+#include "desplat/io/json_text.hpp"
 #include "desplat/train/effects.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
@@ -149,9 +150,9 @@ json read_config_option(const std::string& config) {
   }
   json j;
   try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    throw std::invalid_argument(source + " is not valid JSON (" + e.what() + "): fix it or give the settings inline");
+    j = parse_json_bounded(text, source);
+  } catch (const JsonTextError& e) {
+    throw std::invalid_argument(std::string(e.what()) + "; fix it or give the settings inline");
   }
   if (!j.is_object())
     throw std::invalid_argument(source + " must be a JSON object of settings such as {\"num_downscales\": 0} (got " +

@@ -3,6 +3,8 @@
 // to the output folder before every check has passed (SfM on --images writes <out>/sfm).
 #include "desplat/jobs/training_run.hpp"
 
+#include "desplat/io/output_folder.hpp"
+
 #include <algorithm>
 #include <cstdio>
 #include <stdexcept>
@@ -20,7 +22,7 @@ namespace {
 
 // A fresh run refuses a folder holding an earlier run's outputs unless --overwrite (which
 // removes them only once every check has passed: prepare_output_folder).
-void check_output_folder(const TrainingRunOptions& opt) {
+void refuse_earlier_outputs(const TrainingRunOptions& opt) {
   if (opt.resume && opt.overwrite) throw std::invalid_argument("--resume and --overwrite contradict each other");
   if (opt.resume || opt.overwrite) return;
   const std::vector<fs::path> outputs = ModelFolder(opt.out_dir).existing_training_outputs();
@@ -107,7 +109,8 @@ void describe_trainer(const Trainer& trainer) {
 }  // namespace
 
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
-  check_output_folder(opt);
+  check_output_folder("--out", opt.out_dir, {{"--data", opt.data_dir}, {"--images", opt.images_dir}, {"--masks", opt.masks_dir}});
+  refuse_earlier_outputs(opt);
   const RequestedSettings requested = request_settings(opt);
   const RunInputs inputs = load_run_inputs(opt);
   const ModelFolder model(opt.out_dir);

@@ -4,6 +4,7 @@
 #include <fstream>
 #include <system_error>
 
+#include "desplat/io/output_folder.hpp"
 #include "sfm/pipeline.hpp"
 #include "sfm/quoting.hpp"
 
@@ -75,6 +76,11 @@ void prepare_output(const SfmOptions& o, const Layout& l, const std::vector<fs::
   if (is_inside(o.out, o.images))
     fail(SfmErrorKind::OutputExists, "--out " + in_quotes(o.out) + " is inside the images folder " +
                                          in_quotes(o.images) + "; choose an --out outside it");
+  try {
+    check_output_folder("--out", o.out, {{"--images", o.images}});
+  } catch (const std::invalid_argument& e) {
+    fail(SfmErrorKind::OutputExists, e.what());
+  }
   fs::create_directories(o.out, ec);
   if (ec || !fs::is_directory(o.out))
     fail(SfmErrorKind::OutputExists,

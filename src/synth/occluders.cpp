@@ -2,6 +2,7 @@
 // views of a capture and writing the result as a scene with ground-truth distractor masks.
 // See include/desplat/synth/occluders.hpp for what is written; the mask layout is masks.hpp's.
 #include "desplat/synth/occluders.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -411,10 +412,16 @@ OccludedView write_view(const Capture& c, size_t i, const std::vector<size_t>& t
 
 OccludeReport occlude_scene(const OccludeOptions& o) {
   check_options(o);
+  if (o.out_dir.empty()) throw OccludeError("--out is empty: give the folder to write the scene into");
   const fs::path data = fs::absolute(o.data_dir).lexically_normal();
   const fs::path out = fs::absolute(o.out_dir).lexically_normal();
   const Capture c = read_capture(data, o.split);
   check_output_place(data, out, o.overwrite);
+  try {  // what check_output_place leaves: the root, a file, an --out holding the input
+    check_output_folder("--out", o.out_dir, {{"--data", o.data_dir}});
+  } catch (const std::invalid_argument& e) {
+    throw OccludeError(e.what());
+  }
 
   std::vector<size_t> train;
   for (size_t i = 0; i < c.names.size(); ++i)

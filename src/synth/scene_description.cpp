@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "desplat/synth/synth.hpp"
+#include "desplat/io/json_text.hpp"
 
 namespace desplat::synth {
 namespace {
@@ -288,7 +289,7 @@ json read_json_file(const fs::path& file) {
   std::ifstream in(file);
   if (!in) throw SynthError(file.string() + ": cannot read the scene description");
   try {
-    return json::parse(in, nullptr, true, /*ignore_comments=*/true);
+    return parse_json_bounded(in, file.string(), /*ignore_comments=*/true);
   } catch (const json::parse_error& e) {
     throw SynthError(file.string() + ": not valid JSON: " + e.what());
   }
@@ -296,7 +297,9 @@ json read_json_file(const fs::path& file) {
 
 // The description of `file` with its base chain applied, not yet checked across fields.
 Description load_layers(const fs::path& file, std::set<fs::path>& seen) {
-  const fs::path canonical = fs::weakly_canonical(file);
+  std::error_code ec;  // a pipe (/dev/fd/N) has no canonical path: its absolute one names it
+  fs::path canonical = fs::weakly_canonical(file, ec);
+  if (ec) canonical = fs::absolute(file);
   if (!seen.insert(canonical).second) throw SynthError(file.string() + ": the chain of \"base\" files loops back here");
   json j = read_json_file(file);
   const Source src{file.string()};

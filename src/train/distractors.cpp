@@ -4,7 +4,10 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <cstdio>
 #include <stdexcept>
+#include <string>
+#include <unistd.h>
 
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/init.hpp"
@@ -17,6 +20,30 @@ int distractor_count_for(const Camera& cam, const DistractorSettings& s) {
   if (s.reference_pixels == 0 || s.initial_count == 0) return s.initial_count;
   const double pixels = double(cam.width) * double(cam.height);
   return int(std::max<long>(1, std::lround(s.initial_count * pixels / s.reference_pixels)));
+}
+
+void check_initial_distractors(const std::vector<Camera>& cameras, const DistractorSettings& s) {
+  double total = 0;
+  for (const Camera& cam : cameras) {
+    const double count = distractor_count_for(cam, s), pixels = double(cam.width) * double(cam.height);
+    if (count > pixels)
+      throw std::invalid_argument(
+          "distractors.initial_count (--distractors-per-view): " + std::to_string(int64_t(count)) +
+          " initial distractors per view is more than a " + std::to_string(cam.width) + "x" +
+          std::to_string(cam.height) + " training view has pixels (" + std::to_string(int64_t(pixels)) +
+          "); a distractor Gaussian explains at least a pixel, so give at most that many");
+    total += count;
+  }
+  const double physical = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+  const double need = total * kDistractorBytes;
+  if (physical > 0 && need > physical) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "distractors.initial_count (--distractors-per-view): %.0f distractor Gaussians over %zu training "
+                  "views need about %.1f GB, more than this machine's %.1f GB of memory; give fewer per view",
+                  total, cameras.size(), need / 1e9, physical / 1e9);
+    throw std::invalid_argument(text);
+  }
 }
 
 GaussianSet init_distractors(const Camera& cam, const DistractorSettings& s, uint64_t seed) {

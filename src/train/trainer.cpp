@@ -93,6 +93,10 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
                                     std::to_string(v.camera.height) + " pixels");
       if (std::any_of(v.keep.begin(), v.keep.end(), [](uint8_t k) { return k > 1; }))
         throw std::invalid_argument("view " + v.name + ": its mask must hold only 0 (ignore) and 1 (use)");
+      // A view with no kept pixel has nothing to train on and no score (its PSNR would be 0/0).
+      if (std::none_of(v.keep.begin(), v.keep.end(), [](uint8_t k) { return k == 1; }))
+        throw std::invalid_argument("view " + v.name + ": its mask keeps no pixel (it is all black), so the view has "
+                                    "nothing to train on or score; fix the mask, or leave the view out");
     }
   // SSIM (the loss, the evaluation) needs 11×11 pixels, at the coarsest level of the
   // resolution schedule too: say so before training rather than fail at its first step.
@@ -135,6 +139,9 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
       scene_depth_ = camera_path_.median_depth > 0 ? camera_path_.median_depth : median_scene_depth(cameras, data_.points);
   }
   if (config_.distractors.enabled) {
+    std::vector<Camera> cameras;
+    for (const TrainView& v : data_.train) cameras.push_back(v.camera);
+    check_initial_distractors(cameras, config_.distractors);
     distractors_.reserve(data_.train.size());
     for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
     if (config_.transient_points.action == TransientPointAction::seed && transient_point_count > 0)

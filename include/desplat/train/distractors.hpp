@@ -129,6 +129,15 @@ struct DistractorSettings {
 // (rounded, at least 1 unless initial_count is 0), or initial_count when reference_pixels is 0.
 int distractor_count_for(const Camera& camera, const DistractorSettings& settings);
 
+// Refuses (std::invalid_argument, naming the setting, the view and the figure) initial distractor
+// counts a run cannot use: more than a view's pixels (a distractor explains at least a pixel, so
+// more add nothing but memory and time), or more distractor memory, over all `cameras`, than
+// the machine has (kDistractorBytes per Gaussian against the physical memory).
+void check_initial_distractors(const std::vector<Camera>& cameras, const DistractorSettings& settings);
+// Bytes one distractor Gaussian takes while training: its 14 RGB-mode floats with both Adam
+// moments and a gradient, its densification statistics, and the initialization's temporaries.
+inline constexpr double kDistractorBytes = 256;
+
 // distractor_count_for(camera) distractors for one view (§5): camera coordinates
 // x, y ~ U(−w, w), z = ρ, mapped to the world with the view's pose; log-scale = log(mean
 // distance to the 3 nearest others in the set); uniformly random unit quaternion; the initial opacity; RGB ~ U(0, 1).
