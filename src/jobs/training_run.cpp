@@ -45,15 +45,19 @@ std::string format_duration(double s) {
   return buf;
 }
 
+// Whether a step that took the views seen from `before` to `after` passed a multiple of
+// `every` (> 0): with a batch of views a step advances by more than one.
+bool reaches_multiple(int64_t before, int64_t after, int64_t every) { return after / every > before / every; }
+
 // One progress line: rewritten in place on a terminal, printed every `log_every` steps
 // otherwise.
 class Progress {
  public:
   Progress(int64_t total, int log_every) : total_(total), log_every_(log_every), tty_(isatty(fileno(stdout))) {}
   void update(const StepStats& s, double elapsed, int64_t done_this_run) {
-    const int64_t step = s.step + 1;
+    const int64_t step = s.step + s.views;
     const bool due = tty_ ? (Clock::now() - last_ > std::chrono::milliseconds(200) || step == total_)
-                          : (step % std::max(1, log_every_) == 0 || step == total_);
+                          : (reaches_multiple(s.step, step, std::max(1, log_every_)) || step == total_);
     if (!due) return;
     last_ = Clock::now();
     const double rate = done_this_run / std::max(elapsed, 1e-9);
@@ -303,7 +307,7 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
                                const TrainingRunOptions& opt, const json& config_overrides, const json& resumed_run,
                                const fs::path& record) {
   const bool settings_named = opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") ||
-                              opt.seed || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
+                              opt.seed || opt.batch || opt.static_only || opt.distractors_per_view || opt.no_distractor_density ||
                               opt.no_regularization;
   if (settings_named) {
     const std::vector<std::string> differ = config_differences(effective_config(asked, data), trained_with, record.string(),
@@ -385,6 +389,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
   if (opt.iterations) config.iterations = *opt.iterations;
   if (opt.seed) config.seed = *opt.seed;
   if (opt.threads) config.threads = *opt.threads;
+  if (opt.batch) config.batch = *opt.batch;
   if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   if (opt.static_only && opt.effects && *opt.effects != "none")
     throw std::invalid_argument("--static-only and --effects " + *opt.effects + " contradict each other");
@@ -586,9 +591,9 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
     }
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
-    const int64_t done = trainer.current_step();
+    const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
-    if (done % curve_every == 0 || done == config.iterations) {
+    if (reaches_multiple(before, done, curve_every) || done == config.iterations) {
       history.push_back({{"kind", "training"},
                          {"step", done},
                          {"wall_seconds", elapsed},
@@ -598,7 +603,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
                          {"distractor_gaussians", trainer.distractor_count()}});
       curve_loss = curve_psnr = 0, curve_steps = 0;
     }
-    if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
+    if (opt.eval_every > 0 && reaches_multiple(before, done, opt.eval_every) && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       json point = {{"kind", "evaluation"},
                     {"step", done},
@@ -610,7 +615,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
       history.push_back(point);
     }
-    if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
+    if (opt.checkpoint_every > 0 && reaches_multiple(before, done, opt.checkpoint_every) && done < config.iterations) save();
   }
   const double wall = run_clock.seconds();
   save();

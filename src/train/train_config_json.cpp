@@ -39,6 +39,7 @@ struct Entry {
 std::vector<Entry> fields(TrainConfig& c) {
   return {
       {"iterations", &c.iterations},
+      {"batch", &c.batch},
       {"sh_degree", &c.sh_degree},
       {"sh_degree_interval", &c.sh_degree_interval},
       {"num_downscales", &c.num_downscales},
@@ -185,6 +186,10 @@ constexpr double kBig = 1e18;
 void validate_config(const TrainConfig& c) {
   // Counts and intervals: several are divisors or moduli, so 0 would crash the run.
   require("iterations", double(c.iterations), 1, kBig, false, "at least 1");
+  // A batch holds at most one refinement of the schedule (batch_event).
+  const int max_batch = std::min(1024, std::max(1, c.densify.refine_every));
+  const std::string batch_allowed = "1.." + std::to_string(max_batch) + " (at most densify.refine_every and 1024)";
+  require("batch", c.batch, 1, max_batch, false, batch_allowed.c_str());
   require("sh_degree", c.sh_degree, 0, 3, false, "0, 1, 2 or 3");
   require("sh_degree_interval", c.sh_degree_interval, 1, kBig, false, "at least 1");
   require("num_downscales", c.num_downscales, 0, 10, false, "0..10");
