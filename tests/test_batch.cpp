@@ -180,6 +180,7 @@ TEST(Batch, DistractorsAndEmbeddingsOfOnlyTheBatchsViewsChange) {
   const std::set<int> batch{t.view_order[0], t.view_order[1], t.view_order[2]};
   ASSERT_EQ(batch.size(), 3u);  // one epoch's order: three different views
   const size_t dim = size_t(c.appearance.image_dim);
+  EXPECT_EQ(t.appearance().adam_step, 3);  // the appearance model: one update per view
   for (size_t v = 0; v < data.train.size(); ++v) {
     const bool in_batch = batch.count(int(v)) > 0;
     const TrainableGaussians& d = t.distractors()[v];
@@ -187,7 +188,10 @@ TEST(Batch, DistractorsAndEmbeddingsOfOnlyTheBatchsViewsChange) {
     EXPECT_EQ(d.adam_step, in_batch ? 1 : 0) << "view " << v;  // one update of its own, unbatched
     const bool moved = !std::equal(embeddings.begin() + v * dim, embeddings.begin() + (v + 1) * dim,
                                    t.appearance().image_embeddings.begin() + v * dim);
-    EXPECT_EQ(moved, in_batch) << "view " << v;
+    // The MLP's last layer starts at zero, so the batch's first view has no embedding gradient
+    // yet; the second and third views see the MLP its update left.
+    if (!in_batch) EXPECT_FALSE(moved) << "view " << v;
+    else if (int(v) != t.view_order[0]) EXPECT_TRUE(moved) << "view " << v;
   }
 }
 
