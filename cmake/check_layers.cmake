@@ -5,7 +5,7 @@
 #   - include a private header "<M>/…" of src/ only when M is L itself.
 # Every public header lives in a layer folder: include/desplat/<L>/.
 cmake_minimum_required(VERSION 3.22)
-set(LAYERS core raster io sfm train eval synth jobs)
+set(LAYERS core raster io sfm comm train eval synth jobs)
 
 if(NOT ROOT)
   message(FATAL_ERROR "check_layers: pass -DROOT=<source tree>")
