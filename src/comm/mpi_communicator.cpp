@@ -17,8 +17,8 @@ template <> MPI_Datatype mpi_type<float>() { return MPI_FLOAT; }
 template <> MPI_Datatype mpi_type<double>() { return MPI_DOUBLE; }
 template <> MPI_Datatype mpi_type<int64_t>() { return MPI_INT64_T; }
 
-// Values per round of the ordered sum: rank 0 holds size() rounds' worth at a time, so its
-// extra memory stays bounded whatever the array's length (and MPI counts stay within int).
+// Values per chunk of the ordered sum: rank 0 holds size() chunks at a time, so its extra
+// memory stays bounded whatever the array's length (and MPI counts stay within int).
 constexpr size_t kChunkValues = size_t(1) << 20;
 
 class Mpi final : public Communicator {

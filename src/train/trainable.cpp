@@ -165,7 +165,7 @@ bool adam_rows(float* p, float* m, float* v, const float* g, int64_t rows, int s
 }
 
 // adam_rows with the width fixed for SH degrees 0, 1 and 3 (3, 12 and 48 floats); degree 2's 27
-// and any other width run generically (a fixed 27 measured slower: bench_adam, 1.40 against 1.31 ms).
+// and any other width run generically (bench_adam: a fixed 27 is slower than the generic loop).
 bool adam_sh_rows(float* p, float* m, float* v, const float* g, int64_t rows, int stride, int width,
                   const float* lane_step, float sqrt_bc2, const AdamSettings& a) {
   switch (width) {

@@ -15,8 +15,8 @@
 namespace desplat {
 
 // How the densification statistics are gathered and read (docs/METHOD.md §7). Each switch
-// is a measured departure from the authors' code (docs/bench/issue17_ab.md); --preset paper
-// sets the authors' choice.
+// departs from the authors' code for the reason §7 gives; --preset paper sets the authors'
+// choice.
 struct StatisticsRules {
   // true: each step's gradient is scaled by 0.5·max(W, H) of that step's image, so a
   // refinement just after a resolution switch judges all its steps in the same units.
@@ -33,15 +33,15 @@ struct StatisticsRules {
   // a mask (A_d > kDistractorMaskThreshold) does not count as seen by the view, as a centre on
   // an ignored pixel does not: its gradient there passes through 1 − A_d < ½, so counting the
   // view dilutes the mean gradient of what lies behind an occluder. false (authors): every
-  // view it projects into counts. Measured and not kept (docs/bench/issue17_ab.md, round 8):
-  // +0.40 dB on clutter_tracks_100 at 500×375, −0.17 to −0.22 dB on three occluded fox scenes.
+  // view it projects into counts. Off by default: it helps a heavily cluttered synthetic
+  // scene and costs occluded real captures (docs/METHOD.md §7, statistics behind a mask).
   bool hide_behind_distractors = false;
   // true: a static Gaussian's gradient from a step whose view has distractors is scaled by
   // kept pixels / Σ kept·(1 − A_d) (seen_pixel_gradient_scale): the loss is a mean over every
   // pixel, but under a distractor the static layer gets almost no gradient, so the same
   // residual on what the view still shows would read smaller than on a clean view. A user
   // mask's loss is a mean over the kept pixels only; this judges a learned mask the same way.
-  // Measured: docs/bench/issue17_ab.md, round 20. false (authors): the gradient as it is.
+  // false (authors): the gradient as it is.
   bool gradient_per_seen_pixel = true;
 };
 
