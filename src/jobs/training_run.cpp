@@ -587,7 +587,7 @@ int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_re
       pairs.push_back(double(s.static_pairs));
       ns_forward.push_back(1e9 * s.timings.forward / n_pairs);
       ns_forward_backward.push_back(1e9 * (s.timings.forward + s.timings.backward) / n_pairs);
-      visible_share.push_back(double(s.static_visible) / double(std::max<size_t>(1, s.gaussians)));
+      visible_share.push_back(double(s.static_visible) / s.views / double(std::max<size_t>(1, s.gaussians)));
     }
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
