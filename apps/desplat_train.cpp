@@ -35,8 +35,13 @@ int main(int argc, char** argv) {
                  "or paper (the authors' exact behaviour); --config and --iterations apply on top. Default: default "
                  "(with --resume: the settings the model was trained with)")
       ->check(CLI::IsMember(desplat::preset_names()));
-  app.add_option("--iterations", o.iterations, "training steps (default 30000)")
+  app.add_option("--iterations", o.iterations, "training views seen: steps at --batch 1 (default 30000)")
       ->check(desplat::apps::integer_in(1, INT64_MAX));
+  app.add_option("--batch", o.batch,
+                 "training views per optimizer step (default 1): their static gradients are summed into one "
+                 "Adam step with the rates x sqrt(batch) and the betas ^ batch; --iterations and every schedule "
+                 "count views (docs/METHOD.md §6, batches)")
+      ->check(desplat::apps::integer_in(1, 1024));
   app.add_option("--seed", o.seed, "random seed (default 0)")->check(desplat::apps::integer_in(0, INT64_MAX));
   app.add_option("--threads", o.threads, "OpenMP threads; 0 = all cores")->check(desplat::apps::integer_in(0, 4096));
   app.add_flag("--static-only", o.static_only,

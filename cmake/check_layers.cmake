@@ -6,7 +6,7 @@
 #     a public header includes public headers alone, since an installed tree has no src/.
 # Every public header lives in a layer folder: include/desplat/<L>/.
 cmake_minimum_required(VERSION 3.22)
-set(LAYERS core raster io sfm train eval synth jobs)
+set(LAYERS core raster io sfm comm train eval synth jobs)
 
 if(NOT ROOT)
   message(FATAL_ERROR "check_layers: pass -DROOT=<source tree>")

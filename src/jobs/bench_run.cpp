@@ -214,10 +214,12 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
       while (trainer.current_step() < config.iterations) {
         if (stop_requested.load()) return points;
         const Stopwatch watch;
+        const int64_t before = trainer.current_step();
         trainer.step();
         seconds += watch.seconds();
         const int64_t step = trainer.current_step();
-        if (step % grid.eval_every != 0 && step != config.iterations) continue;
+        // A batch of views advances the count by more than one: score where it passes a multiple.
+        if (step / grid.eval_every == before / grid.eval_every && step != config.iterations) continue;
         const std::vector<ViewMetrics> m = trainer.evaluate(test_views);
         BenchPoint p;
         p.scene = name, p.run = run.name, p.clutter_ratio = clutter, p.desplat = config.distractors.enabled;

@@ -60,7 +60,7 @@ json transient_evidence_json(const TransientEvidence& te, const TrainingData& da
 
 // Whether the command names any setting beyond the run's length and threads.
 bool names_settings(const TrainingRunOptions& opt) {
-  return opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") || opt.seed || opt.static_only ||
+  return opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") || opt.seed || opt.batch || opt.static_only ||
          opt.distractors_per_view || opt.no_distractor_density || opt.no_regularization;
 }
 
@@ -187,6 +187,7 @@ RequestedSettings request_settings(const TrainingRunOptions& opt) {
   }
   if (opt.iterations) config.iterations = *opt.iterations;
   if (opt.seed) config.seed = *opt.seed;
+  if (opt.batch) config.batch = *opt.batch;
   if (opt.threads) config.threads = *opt.threads;
   if (config.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   if (opt.static_only && opt.effects && *opt.effects != "none")

@@ -19,15 +19,19 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// Whether a step that took the views seen from `before` to `after` passed a multiple of
+// `every` (> 0): with a batch of views a step advances by more than one.
+bool reaches_multiple(int64_t before, int64_t after, int64_t every) { return after / every > before / every; }
+
 // One progress line: rewritten in place on a terminal, printed every `log_every` steps
 // otherwise.
 class Progress {
  public:
   Progress(int64_t total, int log_every) : total_(total), log_every_(log_every), tty_(isatty(fileno(stdout))) {}
   void update(const StepStats& s, double elapsed, int64_t done_this_run) {
-    const int64_t step = s.step + 1;
+    const int64_t step = s.step + s.views;
     const bool due = tty_ ? (Clock::now() - last_ > std::chrono::milliseconds(200) || step == total_)
-                          : (step % std::max(1, log_every_) == 0 || step == total_);
+                          : (reaches_multiple(s.step, step, std::max(1, log_every_)) || step == total_);
     if (!due) return;
     last_ = Clock::now();
     const double rate = done_this_run / std::max(elapsed, 1e-9);
@@ -123,13 +127,13 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
       r.pairs.push_back(double(s.static_pairs));
       r.ns_forward.push_back(1e9 * s.timings.forward / n_pairs);
       r.ns_forward_backward.push_back(1e9 * (s.timings.forward + s.timings.backward) / n_pairs);
-      r.visible_share.push_back(double(s.static_visible) / double(std::max<size_t>(1, s.gaussians)));
+      r.visible_share.push_back(double(s.static_visible) / s.views / double(std::max<size_t>(1, s.gaussians)));
     }
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
-    const int64_t done = trainer.current_step();
+    const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
-    if (done % curve_every == 0 || done == config.iterations) {
+    if (reaches_multiple(before, done, curve_every) || done == config.iterations) {
       r.history.push_back({{"kind", "training"},
                          {"step", done},
                          {"wall_seconds", elapsed},
@@ -139,7 +143,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
                          {"distractor_gaussians", trainer.distractor_count()}});
       curve_loss = curve_psnr = 0, curve_steps = 0;
     }
-    if (opt.eval_every > 0 && done % opt.eval_every == 0 && done < config.iterations && !data.test.empty()) {
+    if (opt.eval_every > 0 && reaches_multiple(before, done, opt.eval_every) && done < config.iterations && !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       json point = {{"kind", "evaluation"},
                     {"step", done},
@@ -151,7 +155,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
       if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
       r.history.push_back(point);
     }
-    if (opt.checkpoint_every > 0 && done % opt.checkpoint_every == 0 && done < config.iterations) save();
+    if (opt.checkpoint_every > 0 && reaches_multiple(before, done, opt.checkpoint_every) && done < config.iterations) save();
   }
   r.wall_seconds = run_clock.seconds();
   return r;

@@ -33,7 +33,11 @@ std::vector<Setting> table(TrainConfig& c) {
   BackgroundSettings& b = c.background;
   TransientPointSettings& t = c.transient_points;
   return {
-      {"iterations", &c.iterations, kAtLeast1, "Training steps of the whole run."},
+      {"iterations", &c.iterations, kAtLeast1,
+       "Training views seen over the whole run (steps when batch is 1); every schedule counts views."},
+      {"batch", &c.batch, {1, 1024},
+       "Training views per optimizer step: their static gradients are summed into one Adam step with the "
+       "rates x sqrt(batch) and the betas ^ batch; at most densify.refine_every."},
       {"sh_degree", &c.sh_degree, {0, 3}, "Highest spherical-harmonics degree of the static Gaussians' colours."},
       {"sh_degree_interval", &c.sh_degree_interval, kAtLeast1, "The active SH degree grows by one every this many steps."},
       {"num_downscales", &c.num_downscales, {0, 10},

@@ -187,6 +187,11 @@ void validate_config(const TrainConfig& c) {
           }
         },
         s.field);
+  // A batch holds at most one refinement of the static schedule (docs/METHOD.md §6, batches).
+  if (c.batch > c.densify.refine_every)
+    throw std::invalid_argument("config: batch must be at most densify.refine_every (" +
+                                std::to_string(c.densify.refine_every) + "; got " + std::to_string(c.batch) +
+                                "): a batch holds at most one refinement; use a smaller batch");
   if (!cpu_supports(c.kernel_isa))
     throw std::invalid_argument(std::string("config: kernel_isa ") + kernel_isa_name(c.kernel_isa) +
                                 " is not supported by this CPU (or this build); use auto");

@@ -177,10 +177,18 @@ bool adam_sh_rows(float* p, float* m, float* v, const float* g, int64_t rows, in
 }
 }  // namespace
 
-AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a) {
-  ++step;
+AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a, int views) {
+  step += views;
   const double bc2 = 1.0 - std::pow(double(a.beta2), double(step));
   return {1.0 - std::pow(double(a.beta1), double(step)), float(std::sqrt(bc2))};
+}
+
+AdamSettings batch_adam_settings(const AdamSettings& a, int views) {
+  if (views == 1) return a;
+  AdamSettings out = a;
+  out.beta1 = float(std::pow(double(a.beta1), double(views)));
+  out.beta2 = float(std::pow(double(a.beta2), double(views)));
+  return out;
 }
 
 bool all_finite(std::span<const float> values) {
@@ -195,9 +203,12 @@ bool row_finite(const float* p, const float* m, const float* v, int width) {
 }
 }  // namespace
 
-void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& a,
-                                     int trained_color_floats, std::span<const uint8_t> rows_to_update) {
-  const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
+void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam,
+                                     int trained_color_floats, std::span<const uint8_t> rows_to_update,
+                                     int views) {
+  if (views < 1) throw std::logic_error("adam_update: a step covers at least one view");
+  const AdamBiasCorrection bc = advance_adam_step(adam_step, adam, views);
+  const AdamSettings a = batch_adam_settings(adam, views);
   const double bc1 = bc.bc1;
   const float sqrt_bc2 = bc.sqrt_bc2;
   const int64_t n = static_cast<int64_t>(size());

@@ -1,7 +1,6 @@
-// The training loop: one view per step; the static and the view's distractor layer are
-// rendered separately and composited over a random background; photometric loss plus
-// the opacity regularizers; backward through the composite into both; Adam; density
-// control (docs/METHOD.md §4–7).
+// The trainer's state and the training step: a batch of views (one by default), each view's
+// pass (trainer_view_pass.cpp), the static buffer's Adam step and density control, then the
+// distractors' growth (trainer_distractor_growth.cpp) (docs/METHOD.md §4–7).
 #include "desplat/train/trainer.hpp"
 
 #include <algorithm>
@@ -13,11 +12,10 @@
 #include <stdexcept>
 
 #include "desplat/train/background.hpp"
+#include "desplat/train/batch.hpp"
 #include "desplat/train/effects.hpp"
 #include "desplat/train/init.hpp"
 #include "desplat/train/loss.hpp"
-#include "desplat/train/mask_coherence.hpp"
-#include "desplat/train/view_residual.hpp"
 
 namespace desplat {
 namespace {
@@ -79,6 +77,11 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   // --threads 1 run would still start a team per core (and spin in it).
   if (config_.threads > 0) omp_set_num_threads(config_.threads);
   if (data_.train.empty()) throw std::invalid_argument("training needs at least one training view");
+  // A batch holds at most one step of the refinement schedule (batch_event).
+  if (config_.batch < 1 || config_.batch > std::max(1, config_.densify.refine_every))
+    throw std::invalid_argument("batch " + std::to_string(config_.batch) + " must be 1.." +
+                                std::to_string(std::max(1, config_.densify.refine_every)) +
+                                " (at most densify.refine_every views per step); use a smaller --batch");
   for (const TrainView& v : data_.train) {
     v.camera.validate();
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
@@ -181,11 +184,13 @@ size_t Trainer::distractor_count() const {
   return n;
 }
 
-RasterSettings Trainer::raster_settings() const {
+RasterSettings Trainer::raster_settings() const { return raster_settings_at(step_); }
+
+RasterSettings Trainer::raster_settings_at(int64_t index) const {
   RasterSettings rs;
   rs.num_threads = config_.threads;
   rs.isa = config_.kernel_isa;
-  rs.active_sh_degree = config_.sh_degree_at(step_);
+  rs.active_sh_degree = config_.sh_degree_at(index);
   return rs;
 }
 
@@ -256,320 +261,82 @@ std::span<const uint8_t> Trainer::adam_rows(const RasterOutput& forward) const {
   return config_.selective_adam ? std::span<const uint8_t>(forward.visible) : std::span<const uint8_t>();
 }
 
+float Trainer::means_lr_at(int64_t index) const {
+  const double progress = std::min(1.0, double(index) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
+  return float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
+}
+
+const std::vector<uint8_t>& Trainer::uncovered_mask() const {
+  static const std::vector<uint8_t> none;
+  return batch_views_.empty() ? none : batch_views_.back().uncovered;
+}
+
+// A step over a batch (docs/METHOD.md §6, batches): each view's pass in draw order, then the
+// static buffer's one update, then each view's seeding, then every view's distractor
+// refinement when its schedule falls in the batch. With one view this is the single-view
+// step in the same order of random draws.
 StepStats Trainer::step() {
   StepStats stats;
   stats.step = step_;
-  const int view = next_view();
-  const int factor = config_.downscale_at(step_);
-  if (factor == 1) {  // the schedule never goes back to a coarser level: give the pyramid's memory back
-    for (std::vector<ByteImage>& levels : downscaled_)
-      if (!levels.empty()) std::vector<ByteImage>().swap(levels);
-    std::vector<std::vector<std::vector<uint8_t>>>().swap(downscaled_keep_);
-  }
-  const Camera cam = downscale_camera(data_.train[view].camera, factor);
-  const FloatImage& target = target_at(view, factor);
-  const std::span<const float> keep = keep_at(view, factor);
-  const size_t pixels = size_t(cam.width) * cam.height;
-  const RasterSettings rs = raster_settings();
-  std::array<float, 3> bg_color = config_.eval_background;
-  if (config_.random_background && !config_.background.enabled) {
-    std::uniform_real_distribution<float> u(0.0f, 1.0f);
-    bg_color = {u(rng_), u(rng_), u(rng_)};
-  }
-  // A view whose distractors were all culled has no second pass at all.
-  TrainableGaussians* distractors = nullptr;
-  if (config_.distractors.enabled && distractors_[view].size() > 0) distractors = &distractors_[view];
-  stats.view_distractors = distractors ? distractors->size() : 0;
+  const int64_t left = config_.iterations - step_;
+  const int views = int(left > 0 ? std::min<int64_t>(config_.batch, left) : config_.batch);
+  stats.views = views;
+  batch_views_.resize(size_t(views));
   StepProfiler profile;
-  const AppearanceModel* look = config_.appearance.enabled ? &appearance_ : nullptr;
-  const std::span<const float> embedding = look ? appearance_.embedding(size_t(view)) : std::span<const float>();
+  for (int b = 0; b < views; ++b) {
+    batch_views_[size_t(b)].index = step_ + b;
+    train_view(batch_views_[size_t(b)], b == 0, profile, stats);
+  }
+  stats.loss /= views, stats.psnr /= views;
+  const int64_t event = update_static(views, profile, stats);
 
-  // 1. Render each layer, and the background behind them.
-  const bool learned_bg = config_.background.enabled;
-  if (learned_bg)
-    profile.time(&StepTimings::background, [&] {
-      background_pass_.forward(background_, sky_embedding(size_t(view)), cam,
-                               config_.background.sh_degree_at(step_), config_.threads);
-    });
-  const Background bg = learned_bg ? background_pass_.background() : Background(bg_color);
-  profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs, look, embedding); });
-  const double appearance_forward = static_pass_.appearance_seconds;
-  stats.static_pairs = static_pass_.forward.evaluated_pairs;
-  stats.static_visible = size_t(std::count(static_pass_.forward.visible.begin(), static_pass_.forward.visible.end(), 1));
-  if (distractors)
-    profile.time(&StepTimings::distractor, [&] { distractor_pass_.render(*distractors, cam, rs); });
-
-  // 2. Composite, loss, and the loss's gradient with respect to each layer (docs/METHOD.md §4).
-  profile.time(&StepTimings::loss, [&] {
-    const Layer statics = static_pass_.layer();
-    const Layer distractor = distractors ? distractor_pass_.layer() : Layer{};
-    composite_.resize(3 * pixels);
-    composite_layers(statics, distractor, bg, composite_);
-    d_composite_.resize(3 * pixels);
-    const PhotometricLoss loss =
-        photometric_loss(composite_, target.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite_, keep);
-    static_pass_.d_color.resize(3 * pixels);
-    static_pass_.d_alpha.resize(pixels);
-    distractor_pass_.d_color.resize(distractors ? 3 * pixels : 0);
-    distractor_pass_.d_alpha.resize(distractors ? pixels : 0);
-    background_pass_.d_image.resize(learned_bg ? 3 * pixels : 0);
-    composite_layers_backward(statics, distractor, bg, d_composite_,
-                              {static_pass_.d_color, static_pass_.d_alpha, distractor_pass_.d_color,
-                               distractor_pass_.d_alpha, background_pass_.d_image});
-    stats.loss = loss.loss;
-    // With a learned background the static layer need not be opaque everywhere (the sky is
-    // the background's): L_bg replaces λ_s (docs/METHOD.md §11).
-    if (config_.distractors.enabled && config_.distractors.regularize)
-      stats.loss += alpha_regularizers(statics, distractor, learned_bg ? 0.0f : config_.distractors.lambda_static,
-                                       config_.distractors.lambda_distractor, static_pass_.d_alpha,
-                                       distractor_pass_.d_alpha, keep);
-    if (learned_bg)
-      stats.loss += background_alpha_loss(background_pass_.image, target.pixels, statics, distractor, cam.width,
-                                          cam.height, config_.background, static_pass_.d_alpha, keep);
-    if (distractors && config_.distractors.regularize && config_.distractors.lambda_mask_tv > 0)
-      stats.loss += mask_total_variation(distractor.alpha, cam.width, cam.height,
-                                         config_.distractors.lambda_mask_tv, distractor_pass_.d_alpha, keep);
-    // Like the owned-pixel pull, only once the static layer has had its chance (owned_after).
-    if (distractors && config_.distractors.regularize && config_.distractors.lambda_occluder_colour > 0 &&
-        step_ >= config_.distractors.owned_after)
-      stats.loss += occluder_colour_prior(distractor, target.pixels, config_.distractors.lambda_occluder_colour,
-                                          distractor_pass_.d_color, distractor_pass_.d_alpha, keep);
-    if (config_.distractors.enabled) {
-      const DistractorSettings& ds = config_.distractors;
-      const ViewResidual residual = measure_view_residual(
-          statics, distractor, composite_, target.pixels, bg, cam.width,
-          ResidualPenalties{ds.explained_tolerance, ds.lambda_explained,
-                            step_ >= ds.owned_after ? ds.lambda_owned : 0.0f, ds.count_connected_misses},
-          distractor_pass_.d_alpha, ds.reseed_starved_views || ds.seed_uncovered ? &uncovered_mask_ : nullptr, keep);
-      stats.loss += residual.penalty;
-      // What the growth rules count as the static layer's misses (DistractorSettings).
-      view_static_unexplained[view] =
-          float(ds.count_connected_misses ? residual.static_area_fraction() : residual.static_fraction());
-      view_composite_unexplained[view] = float(residual.composite_fraction());
-    }
-    stats.psnr = psnr(composite_, target.pixels, keep);
-  });
-
-  // 3. Backward through each layer's rasterization.
-  profile.time(&StepTimings::backward, [&] { static_pass_.backward(gaussians_, cam, rs, look, embedding); });
-  // The appearance model's share of the static passes is reported on its own.
-  profile.timings.forward -= appearance_forward;
-  profile.timings.backward -= static_pass_.appearance_seconds - appearance_forward;
-  profile.timings.appearance += static_pass_.appearance_seconds;
-  const bool shared = shared_embedding();
-  if (learned_bg)
-    profile.time(&StepTimings::background, [&] {
-      background_pass_.backward(background_, sky_embedding(size_t(view)), cam, config_.threads);
-      const size_t dim = size_t(config_.background.image_dim);
-      d_embeddings_.assign(background_.image_embeddings.size(), 0.0f);
-      if (!shared) std::copy_n(background_pass_.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
-      if (!background_.adam_update(background_pass_.d_mlp, d_embeddings_))
-        warn("step " + std::to_string(step_) + ": the background model's gradient is not finite; its update was skipped");
-    });
-  if (look)
-    profile.time(&StepTimings::appearance, [&] {
-      const size_t dim = size_t(config_.appearance.image_dim);
-      d_embeddings_.assign(appearance_.image_embeddings.size(), 0.0f);
-      std::copy_n(static_pass_.appearance.d_embedding.begin(), dim, d_embeddings_.begin() + size_t(view) * dim);
-      if (shared)
-        for (size_t k = 0; k < dim; ++k) d_embeddings_[size_t(view) * dim + k] += background_pass_.d_embedding[k];
-      if (!appearance_.adam_update(static_pass_.appearance.d_mlp, d_embeddings_))
-        warn("step " + std::to_string(step_) + ": the appearance model's gradient is not finite; its update was skipped");
-    });
-  if (distractors)
-    profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
-
-  // 4. Statistics, Adam and density control: the static buffer …
-  const int image_size = std::max(cam.width, cam.height);
-  // Exponential decay of the means' rate from lr.means to means_lr_final; the distractors'
-  // means follow the same factor.
-  const double progress = std::min(1.0, double(step_) / double(std::max<int64_t>(1, config_.means_lr_decay_steps)));
-  LearningRates lr = config_.lr;
-  lr.means = float(std::exp(std::log(config_.lr.means) * (1 - progress) + std::log(config_.means_lr_final) * progress));
-  const double decay = double(lr.means) / double(config_.lr.means);
-  profile.time(&StepTimings::optimizer, [&] {
-    // Adam first: the rows it updates are the rasterizer's visible ones, before the
-    // statistics hide those centred on ignored pixels (they still have a gradient).
-    const int sh_bands = rs.active_sh_degree + 1;
-    gaussians_.adam_update(static_pass_.grads, lr, AdamSettings{}, 3 * sh_bands * sh_bands,
-                           adam_rows(static_pass_.forward));
-    // Behind this view's distractor mask a static Gaussian is not seen (hide_behind_distractors).
-    const bool hide_behind = distractors && config_.densify.stats.hide_behind_distractors;
-    hide_unseen_centers(static_pass_.forward, keep, hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
-    if (step_ < config_.densify.stop_split_at) {
-      // Judged per pixel the static layer is seen on (gradient_per_seen_pixel).
-      const float seen_scale = distractors && config_.densify.stats.gradient_per_seen_pixel
-                                   ? seen_pixel_gradient_scale(keep, distractor_pass_.forward.alpha)
-                                   : 1.0f;
-      gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats, seen_scale);
-    }
-    stats.nonfinite_pruned = prune_nonfinite(gaussians_, [] { return std::string("static Gaussian"); });
-    stats.refine = refine_gaussians(gaussians_, config_.densify, step_, image_size,
-                                    static_cast<int>(data_.train.size()), rng_);
-    if (stats.refine.ran && !camera_path_.empty()) cull_camera_path(stats.refine);
-  });
-
-  // … and the view's distractor buffer (its statistics are kept after densification stops:
-  // culling unseen distractors needs them), then every view's refinement when it is due.
+  // Each view's seeding, then every view's refinement when it is due in this batch.
   const bool refine_distractors_now =
-      distractor_refine_due(step_, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
-  // A view without distractors that is not due for re-seeding costs nothing here.
-  if (distractors || refine_distractors_now || (config_.distractors.enabled && view_seed_due[view])) {
+      event >= 0 && distractor_refine_due(event, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
+  if (config_.distractors.enabled)
+    for (BatchView& bv : batch_views_)
+      if (view_seed_due[bv.view]) profile.time(&StepTimings::distractor, [&] { stats.reseeded += seed_if_due(bv); });
+  if (refine_distractors_now) {
+    const BatchView& at = batch_views_[size_t(event - step_)];
     profile.time(&StepTimings::distractor, [&] {
-      if (distractors) {
-        LearningRates dlr = config_.distractors.lr;
-        dlr.means = float(dlr.means * decay);
-        distractors->adam_update(distractor_pass_.grads, dlr, AdamSettings{}, -1, adam_rows(distractor_pass_.forward));
-        hide_unseen_centers(distractor_pass_.forward, keep, {});
-        distractors->accumulate_statistics(distractor_pass_.forward, distractor_pass_.grads, config_.densify.stats);
-        stats.nonfinite_pruned +=
-            prune_nonfinite(*distractors, [&] { return "distractor of view " + data_.train[view].name; });
-      }
-      stats.reseeded = seed_if_due(view, cam, target);
-      if (refine_distractors_now) refine_all_distractors(image_size, factor, stats);
+      refine_all_distractors(event, std::max(at.camera.width, at.camera.height), at.factor, stats);
     });
   }
   stats.timings = profile.timings;
   stats.gaussians = gaussians_.size();
-  ++step_;
+  step_ += views;
   return stats;
 }
 
-void Trainer::refine_all_distractors(int image_size, int factor, StepStats& stats) {
-  stats.distractor_refine.ran = true;
-  const DistractorSettings& ds = config_.distractors;
-  for (size_t v = 0; v < distractors_.size(); ++v) {
-    TrainableGaussians& d = distractors_[v];
-    const Camera& full = data_.train[v].camera;
-    const int64_t pixels = int64_t(full.width) * full.height;
-    if (d.size() > 0) {
-      ViewRefinement r;
-      r.view = int(v);
-      r.before = int64_t(d.size());
-      // Idle distractors go first, so the cap's room goes to the ones the view needs.
-      r.idle = cull_idle_distractors(d, downscale_camera(full, factor), factor, ds);
-      r.budget = distractor_growth_budget(d.size(), view_static_unexplained[v], pixels, ds);
-      if (ds.max_alpha_sum > 0) {
-        r.alpha_sum = distractor_alpha_sum(d.params.view(), full);
-        const int64_t by_alpha = alpha_sum_budget(d.size(), r.alpha_sum, view_static_unexplained[v], pixels, ds);
-        if (by_alpha != kUnlimitedGrowth && (r.budget == kUnlimitedGrowth || by_alpha < r.budget)) r.budget = by_alpha;
-      }
-      r.report = refine_distractors(d, config_.densify, ds, step_, image_size, rng_, r.budget, scene_depth_);
-      r.after = int64_t(d.size());
-      stats.distractor_refine += r.report;
-      stats.distractor_refinements.push_back(r);
-      // An emptied view gives its memory back; it is not rendered until it is re-seeded.
-      if (d.size() == 0) {
-        GaussianSet empty;
-        empty.color_mode = ColorMode::RGB;
-        d = TrainableGaussians(std::move(empty));
-      }
-    }
-    const bool starved = ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
-    const bool uncovered = ds.seed_uncovered && uncovered_seed_count(d.size(), view_static_unexplained[v],
-                                                                     view_composite_unexplained[v], pixels, ds) > 0;
-    view_seed_due[v] = step_ < config_.densify.stop_split_at && seeding_settled() && (starved || uncovered);
-  }
-}
-
-void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) {
-  // One distractor on the pixel each transient point projects to, in every training view
-  // that observes it: the same seeds the growth rules place on uncovered pixels.
-  for (size_t v = 0; v < data_.train.size(); ++v) {
-    const TrainView& view = data_.train[v];
-    const Camera& c = view.camera;
-    std::vector<uint8_t> mask(size_t(c.width) * c.height, 0);
-    size_t count = 0;
-    for (size_t i = 0; i < transient.size(); ++i) {
-      if (!transient[i]) continue;
-      const std::vector<int32_t>& observers = data_.point_train_views[i];
-      if (!std::binary_search(observers.begin(), observers.end(), int32_t(v))) continue;
-      const long long pixel = c.pixel_of(data_.points[i]);
-      if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;  // off screen or ignored
-      uint8_t& m = mask[size_t(pixel)];
-      count += !m;
-      m = 1;
-    }
-    if (count == 0) continue;
-    const GaussianSet seeds = reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
-    distractors_[v].append(seeds);
-    transient_seeded += int64_t(seeds.size());
-  }
-}
-
-bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period) {
-  return config.downscale_at(step) == config.downscale_at(std::max<int64_t>(0, step - period));
-}
-
-void hide_unseen_centers(RasterOutput& fw, std::span<const float> keep, std::span<const float> hiding_alpha) {
-  if (keep.empty() && hiding_alpha.empty()) return;
-  for (size_t i = 0; i < fw.visible.size(); ++i) {
-    if (!fw.visible[i]) continue;
-    const float x = fw.means2d[2 * i], y = fw.means2d[2 * i + 1];
-    if (!(x >= 0 && y >= 0 && x < float(fw.width) && y < float(fw.height))) continue;
-    const size_t p = size_t(y) * size_t(fw.width) + size_t(x);
-    if ((!keep.empty() && keep[p] == 0) || (!hiding_alpha.empty() && hiding_alpha[p] > kDistractorMaskThreshold))
-      fw.visible[i] = 0;
-  }
-}
-
-float seen_pixel_gradient_scale(std::span<const float> keep, std::span<const float> distractor_alpha) {
-  if (distractor_alpha.empty()) return 1.0f;
-  double kept = 0, seen = 0;
-  for (size_t p = 0; p < distractor_alpha.size(); ++p) {
-    const double k = keep.empty() ? 1.0 : double(keep[p]);
-    kept += k;
-    seen += k * (1.0 - double(distractor_alpha[p]));
-  }
-  return seen > 0 ? float(kept / seen) : 1.0f;
-}
-
-bool seeding_allowed(const TrainConfig& config, int64_t step, int64_t period) {
-  if (step < config.distractors.seed_after || !resolution_settled(config, step, period)) return false;
-  if (!config.distractors.seed_waits_after_reset) return true;
-  for (int64_t s = step; s > std::max<int64_t>(0, step - period); --s)
-    if (opacity_reset_due(config.densify, s)) return false;
-  return true;
-}
-
-bool Trainer::seeding_settled() const {
-  const int64_t period = int64_t(config_.distractors.refine_every_epochs) * int64_t(data_.train.size());
-  return seeding_allowed(config_, step_, period);
-}
-
-int64_t Trainer::seed_if_due(int view, const Camera& cam, const FloatImage& target) {
-  if (view_seed_due.empty() || !view_seed_due[view]) return 0;
-  view_seed_due[view] = 0;
-  const DistractorSettings& ds = config_.distractors;
-  TrainableGaussians& d = distractors_[view];
-  const Camera& full = data_.train[view].camera;
-  const int64_t full_pixels = int64_t(full.width) * full.height;
-  if (!seeding_settled()) return 0;
-  // This step's residual decides again: the flag was set up to an epoch ago.
-  int64_t count = 0;
-  if (ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[view], full_pixels)) {
-    // As many as the growth cap allows (its A, or 4 px per distractor without one), at most
-    // the view's initial K.
-    DistractorSettings capped = ds;
-    if (capped.pixels_per_distractor <= 0) capped.pixels_per_distractor = 4;
-    const int64_t wanted = distractor_cap(view_static_unexplained[view], full_pixels, capped);
-    count = std::min<int64_t>(distractor_count_for(full, ds), wanted) - int64_t(d.size());
-  } else if (ds.seed_uncovered) {
-    count = uncovered_seed_count(d.size(), view_static_unexplained[view], view_composite_unexplained[view],
-                                 full_pixels, ds);
-  }
-  if (count <= 0) return 0;
-  erode_mask(uncovered_mask_, cam.width, cam.height);
-  const GaussianSet seeds = reseed_distractors(cam, uncovered_mask_, target.pixels, size_t(count), ds, rng_());
-  d.append(seeds);
-  return int64_t(seeds.size());
+int64_t Trainer::update_static(int views, StepProfiler& profile, StepStats& stats) {
+  const int64_t last = step_ + views - 1;
+  const int64_t event = batch_event(step_, views, config_.densify.refine_every);
+  profile.time(&StepTimings::optimizer, [&] {
+    // The batch's rates at its first view (the means' decay), × √views; the colour bands of the
+    // degree its last view trains.
+    LearningRates lr = config_.lr;
+    lr.means = means_lr_at(step_);
+    lr = batch_learning_rates(lr, views);
+    const int sh_bands = config_.sh_degree_at(last) + 1;
+    const std::span<const uint8_t> rows =
+        config_.selective_adam ? std::span<const uint8_t>(batch_visible_) : std::span<const uint8_t>();
+    gaussians_.adam_update(batch_grads_, lr, AdamSettings{}, 3 * sh_bands * sh_bands, rows, views);
+    stats.nonfinite_pruned += prune_nonfinite(gaussians_, last, [] { return std::string("static Gaussian"); });
+    if (event < 0) return;
+    // Judged at the image size of the view whose index the schedule names.
+    const Camera& at = batch_views_[size_t(event - step_)].camera;
+    stats.refine = refine_gaussians(gaussians_, config_.densify, event, std::max(at.width, at.height),
+                                    static_cast<int>(data_.train.size()), rng_);
+    if (stats.refine.ran && !camera_path_.empty()) cull_camera_path(stats.refine);
+  });
+  return event;
 }
 
 // A Gaussian whose parameter or Adam moment is not finite is removed before it can
 // spread NaN through the blending of its neighbours.
 // Adam's update found them (TrainableGaussians::nonfinite_groups): every value it changed
 // is checked there, in the same pass.
-int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std::string()>& what) {
+int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, int64_t index, const std::function<std::string()>& what) {
   if (gs.nonfinite_groups.empty()) return 0;
   std::vector<uint8_t> keep(gs.size(), 1);
   int64_t bad = 0;
@@ -579,180 +346,12 @@ int64_t Trainer::prune_nonfinite(TrainableGaussians& gs, const std::function<std
     std::string groups;
     for (int g = 0; g < kParamGroups; ++g)
       if (gs.nonfinite_groups[i] >> g & 1) groups += std::string(groups.empty() ? "" : ", ") + kParamGroupTable[g].name;
-    warn("step " + std::to_string(step_) + ": " + what() + " " + std::to_string(i) +
+    warn("step " + std::to_string(index) + ": " + what() + " " + std::to_string(i) +
          " has a non-finite parameter or optimizer moment (" + groups + "); pruned");
   }
   gs.nonfinite_groups.clear();
   gs.keep(keep);
   return bad;
-}
-
-FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& background, const ViewLook& look) const {
-  LayerPass pass;
-  const bool recolor = config_.appearance.enabled && !look.appearance.empty();
-  pass.render(gaussians_, camera, raster_settings(), recolor ? &appearance_ : nullptr, look.appearance);
-  if (!config_.background.enabled || look.background.empty()) return composite_over_background(pass.forward, background);
-  BackgroundPass sky;
-  sky.forward(background_, look.background, camera, config_.background.sh_degree_at(step_), config_.threads);
-  return composite_over_background(pass.forward, sky.background());
-}
-
-const char* to_string(EvalProtocol p) {
-  return p == EvalProtocol::appearance_halves ? "per-image embeddings fitted on the left half, scored on the right half"
-                                               : "full image";
-}
-
-ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) const {
-  if (!has_per_image_models()) throw std::invalid_argument("fit_look: this model has no per-image appearance or background");
-  const Camera& cam = view.camera;
-  const size_t pixels = size_t(cam.width) * cam.height;
-  if (fit.size() != pixels) throw std::invalid_argument("fit_look: the fit mask does not match view " + view.name);
-  std::vector<float> keep(fit.begin(), fit.end());
-  if (!view.keep.empty())
-    for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
-  const FloatImage photo = to_float(view.image);
-  const bool recolor = config_.appearance.enabled, sky = config_.background.enabled;
-  ViewLook look = config_.appearance.test_start_from_best_look ? training_look(best_training_look(view, fit))
-                                                               : mean_look();
-  const bool shared = shared_embedding();
-  std::vector<float> m_a(look.appearance.size(), 0.0f), v_a(m_a), m_b(look.background.size(), 0.0f), v_b(m_b);
-  const RasterSettings rs = raster_settings();
-  const int bg_degree = config_.background.sh_degree_at(step_);
-  const AdamSettings adam;
-  const AppearanceSettings& as = config_.appearance;
-  LayerPass pass;
-  BackgroundPass sky_pass;
-  std::vector<float> composite(3 * pixels), d_composite(3 * pixels);
-  auto finite = [](const std::vector<float>& g) { return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); }); };
-  for (int step = 1; step <= as.test_steps; ++step) {
-    pass.render(gaussians_, cam, rs, recolor ? &appearance_ : nullptr, look.appearance);
-    if (sky) sky_pass.forward(background_, look.background, cam, bg_degree, config_.threads);
-    const Background bg = sky ? sky_pass.background() : Background(config_.eval_background);
-    composite_layers(pass.layer(), Layer{}, bg, composite);
-    photometric_loss(composite, photo.pixels, cam.width, cam.height, config_.ssim_lambda, d_composite, keep);
-    pass.d_color.resize(3 * pixels);
-    pass.d_alpha.resize(pixels);
-    sky_pass.d_image.resize(sky ? 3 * pixels : 0);
-    composite_layers_backward(pass.layer(), Layer{}, bg, d_composite,
-                              {pass.d_color, pass.d_alpha, {}, {}, sky_pass.d_image});
-    const double bc1 = 1.0 - std::pow(double(adam.beta1), step);
-    const float step_size = float(as.test_lr / bc1), sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
-    if (sky) sky_pass.backward(background_, look.background, cam, config_.threads);
-    if (recolor) {
-      pass.backward(gaussians_, cam, rs, &appearance_, look.appearance);
-      std::vector<float>& grad = pass.appearance.d_embedding;
-      if (shared)  // one embedding: the background's gradient joins the appearance's
-        for (size_t k = 0; k < grad.size(); ++k) grad[k] += sky_pass.d_embedding[k];
-      if (!finite(grad)) break;
-      adam_span(look.appearance.data(), m_a.data(), v_a.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
-      if (shared) look.background = look.appearance;
-    }
-    if (sky && !shared) {
-      const std::vector<float>& grad = sky_pass.d_embedding;
-      if (!finite(grad)) break;
-      adam_span(look.background.data(), m_b.data(), v_b.data(), grad.data(), grad.size(), step_size, sqrt_bc2, adam);
-    }
-  }
-  return look;
-}
-
-ViewLook Trainer::training_look(size_t j) const {
-  ViewLook look;
-  look.start = data_.train.at(j).name;
-  if (config_.appearance.enabled) {
-    const std::span<const float> e = appearance_.embedding(j);
-    look.appearance.assign(e.begin(), e.end());
-  }
-  if (config_.background.enabled) {
-    const std::span<const float> e = sky_embedding(j);
-    look.background.assign(e.begin(), e.end());
-  }
-  return look;
-}
-
-ViewLook Trainer::mean_look() const {
-  ViewLook look;
-  look.start = "mean";
-  if (config_.appearance.enabled) {
-    const size_t dim = size_t(config_.appearance.image_dim);
-    look.appearance.assign(dim, 0.0f);
-    for (size_t j = 0; j < appearance_.views(); ++j)
-      for (size_t k = 0; k < dim; ++k) look.appearance[k] += appearance_.embedding(j)[k] / float(appearance_.views());
-  }
-  if (config_.background.enabled) look.background = shared_embedding() ? look.appearance : background_.mean_embedding();
-  return look;
-}
-
-size_t Trainer::best_training_look(const TrainView& view, std::span<const float> fit) const {
-  if (!has_per_image_models()) throw std::invalid_argument("best_training_look: this model has no per-image looks");
-  const int width = view.camera.width, height = view.camera.height;
-  if (fit.size() != size_t(width) * height)
-    throw std::invalid_argument("best_training_look: the fit mask does not match view " + view.name);
-  int factor = 1;
-  while (std::max(width, height) / factor > kLookSearchPixels) factor *= 2;
-  const Camera cam = downscale_camera(view.camera, factor);
-  const FloatImage photo = to_float(factor == 1 ? view.image : downscale_bytes(view.image, factor));
-  std::vector<uint8_t> judged(fit.size());
-  for (size_t p = 0; p < fit.size(); ++p) judged[p] = fit[p] > 0.5f && (view.keep.empty() || view.keep[p] != 0);
-  const std::vector<uint8_t> small = factor == 1 ? judged : downscale_keep(judged, width, height, factor);
-  const std::vector<float> keep(small.begin(), small.end());
-  size_t best = 0;
-  double best_loss = std::numeric_limits<double>::infinity();
-  for (size_t j = 0; j < data_.train.size(); ++j) {
-    const FloatImage img = render(cam, config_.eval_background, training_look(j));
-    const double loss = photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, config_.ssim_lambda, {}, keep).loss;
-    if (loss < best_loss) best_loss = loss, best = j;  // the first of equals: the lowest index
-  }
-  return best;
-}
-
-ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>& background) const {
-  const GaussianSet* d = distractors_.empty() ? nullptr : &distractors_.at(train_view).params;
-  std::function<void(RasterOutput&)> recolor;
-  AppearancePass pass;
-  if (config_.appearance.enabled)  // the static layer in this photo's appearance
-    recolor = [&](RasterOutput& fw) {
-      pass.forward(appearance_, appearance_.embedding(train_view), gaussians_.params, fw, config_.threads);
-    };
-  const Camera& camera = data_.train.at(train_view).camera;
-  BackgroundPass sky;
-  if (config_.background.enabled)  // and over its own background
-    sky.forward(background_, sky_embedding(train_view), camera, config_.background.sh_degree_at(step_),
-                config_.threads);
-  const Background bg = config_.background.enabled ? sky.background() : Background(background);
-  return render_view_layers(gaussians_.params, d, camera, raster_settings(), bg, recolor);
-}
-
-std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
-  std::vector<ViewMetrics> out;
-  for (const TrainView& v : views) {
-    // The halves: the right one is scored under either protocol; the left one is where the
-    // Photo Tourism protocol fits a model's embeddings (the view's own mask applies to both).
-    const int w = v.camera.width, h = v.camera.height;
-    std::vector<float> left(size_t(w) * h, 0.0f), right(size_t(w) * h, 0.0f), whole;
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const size_t p = size_t(y) * w + x;
-        const float keep = v.keep.empty() ? 1.0f : v.keep[p];
-        (x < w / 2 ? left : right)[p] = keep;
-      }
-    ViewMetrics m;
-    m.name = v.name;
-    if (has_per_image_models()) m.protocol = EvalProtocol::appearance_halves, m.look = fit_look(v, left);
-    const FloatImage img = render(v.camera, config_.eval_background, m.look);
-    const FloatImage photo = to_float(v.image);
-    m.psnr_right_half = psnr(img.pixels, photo.pixels, right);
-    m.ssim_right_half = ssim(img.pixels, photo.pixels, w, h, right);
-    if (m.protocol == EvalProtocol::appearance_halves) {
-      m.psnr = m.psnr_right_half, m.ssim = m.ssim_right_half;
-    } else {
-      whole.assign(v.keep.begin(), v.keep.end());  // empty when the view has no mask
-      m.psnr = psnr(img.pixels, photo.pixels, whole);
-      m.ssim = ssim(img.pixels, photo.pixels, w, h, whole);
-    }
-    out.push_back(std::move(m));
-  }
-  return out;
 }
 
 }  // namespace desplat

@@ -39,6 +39,7 @@ struct TrainingRunOptions {
   std::optional<int64_t> iterations;
   std::optional<uint64_t> seed;
   std::optional<int> threads;
+  std::optional<int> batch;  // TrainConfig::batch: training views per optimizer step
   bool static_only = false;  // the Splatfacto baseline: no distractors (= effects "none")
   // train/effects.hpp: auto, none or a list; unset: auto (none with static_only, the preset's
   // own set with --preset paper).

@@ -19,7 +19,14 @@
 namespace desplat {
 
 struct TrainConfig {
+  // Views seen over the run: every schedule below (SH degree, resolution, the means' decay,
+  // density control, distractor refinement) counts views, whatever `batch` is.
   int64_t iterations = 30000;
+  // Training views rendered per optimizer step (docs/METHOD.md §6, batches): their static
+  // gradients and densification statistics are summed into one Adam step (rates × √batch,
+  // betas ^ batch); distractors, appearance and background keep one update per view. 1: one
+  // view per step.
+  int batch = 1;
   int sh_degree = 3;
   int sh_degree_interval = 1000;  // active SH degree +1 every this many steps
   int num_downscales = 2;         // train at 2^num_downscales lower resolution first …

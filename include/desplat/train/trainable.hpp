@@ -57,12 +57,18 @@ bool adam_span(float* p, float* m, float* v, const float* g, size_t n, float ste
                const AdamSettings& a);
 
 // One Adam step's bias corrections: bc1 = 1 − β1^t (step sizes are rate / bc1) and
-// √(1 − β2^t) for adam_span, after advancing the step count t by one.
+// √(1 − β2^t) for adam_span, after advancing the count t by `views`: a step over a batch of
+// B views counts B, so the corrections of B-view steps with β^B (batch_adam_settings) are
+// those of single-view steps at the same views seen (docs/METHOD.md §6, batches).
 struct AdamBiasCorrection {
   double bc1;
   float sqrt_bc2;
 };
-AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a);
+AdamBiasCorrection advance_adam_step(int64_t& step, const AdamSettings& a, int views = 1);
+
+// The moments' decay of one step over `views` views: β1^views and β2^views, ε unchanged
+// (Grendel-GS's momentum rule, docs/METHOD.md §6, batches); `a` itself when views is 1.
+AdamSettings batch_adam_settings(const AdamSettings& a, int views);
 
 // Whether every value is finite (a gradient that may enter Adam).
 bool all_finite(std::span<const float> values);
@@ -70,7 +76,7 @@ bool all_finite(std::span<const float> values);
 struct TrainableGaussians {
   GaussianSet params;
   std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params
-  int64_t adam_step = 0;  // Adam's bias-correction step count (one for all groups)
+  int64_t adam_step = 0;  // Adam's bias-correction count in views seen (one for all groups)
   // Densification statistics since the last refinement (docs/METHOD.md §7).
   std::vector<float> absgrad_sum;     // [N] Σ over steps of the absgrad statistic
   std::vector<int32_t> visible_count; // [N] steps in which the Gaussian was visible
@@ -108,8 +114,10 @@ struct TrainableGaussians {
   // flag is 0 keeps its parameters and both moments exactly as they are, as if the step had
   // not happened for it; the step count, and so the bias correction, advances for all
   // (selective Adam, docs/METHOD.md §6).
+  // `views` > 1: `grads` is the sum over a batch of that many views; the moments decay with
+  // batch_adam_settings and the bias correction counts views (the caller scales the rates).
   void adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam = {},
-                   int trained_color_floats = -1, std::span<const uint8_t> rows = {});
+                   int trained_color_floats = -1, std::span<const uint8_t> rows = {}, int views = 1);
   // After adam_update: empty when every updated value and moment is finite; otherwise [N],
   // bit g set when row i of group g holds a non-finite value or moment.
   std::vector<uint8_t> nonfinite_groups;

@@ -101,15 +101,18 @@ struct ViewRefinement {
   RefineReport report;
 };
 
+// One optimizer step: a batch of `views` training views, the view indices
+// [step, step + views). Loss and PSNR are the views' means; counts are summed over them.
 struct StepStats {
   int64_t step = 0;
+  int views = 1;
   double loss = 0, psnr = 0;
   size_t gaussians = 0;             // static
-  size_t view_distractors = 0;      // distractors of this step's view
+  size_t view_distractors = 0;      // distractors of this step's views
   RefineReport refine;
   RefineReport distractor_refine;   // summed over views when they were refined this step
   std::vector<ViewRefinement> distractor_refinements;  // per view, when they were refined
-  int64_t reseeded = 0;             // distractors seeded in this step's view (starved or uncovered)
+  int64_t reseeded = 0;             // distractors seeded in this step's views (starved or uncovered)
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
   // Work of the static layer's render: Gaussian–pixel pairs whose α was evaluated, and
@@ -156,7 +159,10 @@ class Trainer {
   // `data` must outlive the trainer.
   Trainer(const TrainingData& data, TrainConfig config);
 
+  // One optimizer step over min(batch, iterations − current_step()) views (the batch when
+  // the run is already at its length).
   StepStats step();
+  // Views seen so far: the index of the next view to train.
   int64_t current_step() const { return step_; }
   const TrainConfig& config() const { return config_; }
   const TrainingData& data() const { return data_; }
@@ -224,9 +230,9 @@ class Trainer {
   int64_t camera_path_culled = 0;            // by either rule of train/free_space.hpp, this run
   int64_t camera_path_blind_gap_culled = 0;  // of those, by the blind-gap rule
   void set_step(int64_t s) { step_ = s; }
-  // The latest step's pixels neither layer explains [H·W of that step's camera]; after a step
-  // that seeded distractors, the eroded mask they were drawn from. For inspection.
-  const std::vector<uint8_t>& uncovered_mask() const { return uncovered_mask_; }
+  // The latest step's last view's pixels neither layer explains [H·W of its camera]; after a
+  // step that seeded that view, the eroded mask they were drawn from. For inspection.
+  const std::vector<uint8_t>& uncovered_mask() const;
   // Whether the background reads the appearance embedding (BackgroundSettings::
   // share_appearance_embedding with both models on), and the embedding it reads for a view.
   bool shared_embedding() const;
@@ -247,18 +253,40 @@ class Trainer {
   // Per view: images at factor 2, 4, … (index k holds factor 2^(k+1)), built when the
   // resolution schedule first needs them and freed once it has reached full resolution.
   std::vector<std::vector<ByteImage>> downscaled_;
-  FloatImage target_;  // this step's photo in float, at the step's resolution
+  FloatImage target_;  // the latest view's photo in float, at its resolution
   // Per view with a mask: the mask at factor 2, 4, … (a pixel is kept when all it covers is),
   // freed with downscaled_.
   std::vector<std::vector<std::vector<uint8_t>>> downscaled_keep_;
-  std::vector<float> keep_;  // this step's mask in float (the losses weigh pixels with it)
+  std::vector<float> keep_;  // the latest view's mask in float (the losses weigh pixels with it)
+  // One view of the step's batch, kept from its pass until the step's seeding.
+  struct BatchView {
+    int view = 0;         // index into data.train
+    int64_t index = 0;    // views seen before it (the schedules' step)
+    int factor = 1;       // its resolution factor
+    Camera camera;        // at that factor
+    std::vector<uint8_t> uncovered;  // its pixels neither layer explains [H·W of camera]
+  };
   // Scratch reused every step.
+  std::vector<BatchView> batch_views_;
   LayerPass static_pass_, distractor_pass_;
   BackgroundPass background_pass_;
   std::vector<float> composite_, d_composite_;
-  std::vector<uint8_t> uncovered_mask_;  // this step's pixels neither layer explains
+  RasterGradients batch_grads_;         // the batch's summed static gradients
+  std::vector<uint8_t> batch_visible_;  // [N] visible in any of the batch's views (selective Adam)
 
   int next_view();
+  // One view's pass (docs/METHOD.md §4–7): draws the view and its background, renders, takes
+  // the loss and the backward, applies its per-view updates (distractors, appearance,
+  // background) and adds its static gradient to batch_grads_ and its statistics to the
+  // static buffer's (`first`: the batch's first view, which starts the sums).
+  void train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats);
+  // The static buffer's one Adam step over the batch's `views` views and its refinement when
+  // the refinement schedule falls in the batch; returns the refinement's view index, or −1.
+  int64_t update_static(int views, StepProfiler& profile, StepStats& stats);
+  RasterSettings raster_settings_at(int64_t index) const;
+  // The static means' rate at view index `index`: lr.means decaying exponentially to
+  // means_lr_final over means_lr_decay_steps views.
+  float means_lr_at(int64_t index) const;
   // The view's photo at 1/factor resolution, converted into target_ (valid until the next call).
   const FloatImage& target_at(int view, int factor);
   // The view's mask at 1/factor resolution, converted into keep_ (valid until the next call);
@@ -267,15 +295,18 @@ class Trainer {
   std::span<const uint8_t> adam_rows(const RasterOutput& forward) const;
   // `what` names the set in warnings, e.g. "static Gaussian" or "distractor of view " + name
   // (built only when something is pruned).
-  int64_t prune_nonfinite(TrainableGaussians& g, const std::function<std::string()>& what);
-  void refine_all_distractors(int image_size, int factor, StepStats& stats);
+  // `index`: the view index the warning names.
+  int64_t prune_nonfinite(TrainableGaussians& g, int64_t index, const std::function<std::string()>& what);
+  // Every view's distractor refinement at view index `index` (its schedule's event).
+  void refine_all_distractors(int64_t index, int image_size, int factor, StepStats& stats);
   // Culls the static Gaussians on camera_path_ after a static refinement; counts them in `report`.
   void cull_camera_path(RefineReport& report);
-  // Seeds this step's view when its latest refinement found it starved or uncovered and this
-  // step's residual agrees (docs/METHOD.md §7, growth control). Returns the count added.
-  int64_t seed_if_due(int view, const Camera& camera, const FloatImage& target);
-  // seeding_allowed for this step, over one distractor-refinement period.
-  bool seeding_settled() const;
+  // Seeds the batch view's training view when its latest refinement found it starved or
+  // uncovered and this pass's residual agrees (docs/METHOD.md §7, growth control). Returns
+  // the count added.
+  int64_t seed_if_due(BatchView& bv);
+  // seeding_allowed at view index `index`, over one distractor-refinement period.
+  bool seeding_settled(int64_t index) const;
   // TransientPointAction::seed: distractors where the transient points project in the
   // training views that observe them.
   void seed_from_transient_points(const std::vector<uint8_t>& transient);
