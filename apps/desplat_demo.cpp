@@ -41,11 +41,12 @@ GaussianSet demo_scene() {
     for (float& v : p) v = u(rng), n2 += v * v;
     const float n = std::sqrt(n2);
     const float x = 0.6f * p[0] / n, y = 0.6f * p[1] / n + 0.35f, z = 0.6f * p[2] / n;
-    const float hue = std::atan2(z, x) / (2 * std::numbers::pi_v<float>) + 0.5f;
+    const float hue = 0.5f + std::atan2(z, x) / (2 * std::numbers::pi_v<float>);
     const float r = 0.5f + 0.5f * std::cos(6.2832f * hue), gr = 0.5f + 0.5f * std::cos(6.2832f * (hue - 0.333f)),
                 b = 0.5f + 0.5f * std::cos(6.2832f * (hue - 0.667f));
     const float band = std::fmod(y * 6 + 10, 1.0f) < 0.15f ? 0.2f : 1.0f;
-    items.push_back({x, y, z, std::log(0.035f), std::log(0.035f), std::log(0.01f), r * band, gr * band, b * band, 2.0f});
+    items.push_back(
+        {x, y, z, std::log(0.035f), std::log(0.035f), std::log(0.01f), r * band, gr * band, b * band, 2.0f});
   }
   for (int k = 0; k < 240; ++k) {
     const float a = 2 * std::numbers::pi_v<float> * k / 240;

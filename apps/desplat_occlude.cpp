@@ -5,8 +5,8 @@
 
 #include <cstdio>
 
-#include "desplat/synth/occluders.hpp"
 #include "desplat/io/splits.hpp"
+#include "desplat/synth/occluders.hpp"
 #include "split_options.hpp"
 
 int main(int argc, char** argv) {
@@ -17,9 +17,11 @@ int main(int argc, char** argv) {
   desplat::OccludeOptions o;
   app.add_option("--data", o.data_dir, "scene folder with images/ and sparse/0/ (read only)")->required();
   app.add_option("--out", o.out_dir, "output scene folder (not inside --data)")->required();
-  app.add_option("--fraction", o.fraction, "share of the training views that get occluders (0..1)")->capture_default_str();
+  app.add_option("--fraction", o.fraction, "share of the training views that get occluders (0..1)")
+      ->capture_default_str();
   app.add_option("--seed", o.seed, "random seed: same seed, same files")->capture_default_str();
-  app.add_option("--coverage-min", o.coverage_min, "least share of an occluded view's pixels covered")->capture_default_str();
+  app.add_option("--coverage-min", o.coverage_min, "least share of an occluded view's pixels covered")
+      ->capture_default_str();
   app.add_option("--coverage-max", o.coverage_max, "largest share of an occluded view's pixels covered (<= 0.6)")
       ->capture_default_str();
   app.add_option("--track", o.track_length,

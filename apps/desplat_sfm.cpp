@@ -63,8 +63,7 @@ int main(int argc, char** argv) {
   std::string cameras = "auto";
   bool quiet = false;
 
-  app.add_option("--images", o.images, "Folder of photos (read only; searched recursively)")
-      ->required();
+  app.add_option("--images", o.images, "Folder of photos (read only; searched recursively)")->required();
   app.add_option("--out", o.out, "Output folder (created if missing)")->required();
   app.footer(kFooter);
   app.add_option("--matcher", matcher, "Which photo pairs to match (see Matchers below)")

@@ -51,11 +51,11 @@ int main(int argc, char** argv) {
     synth::Description d = synth::load_description(scene_file);
     if (seed) d = synth::apply_description(d, {{"seed", *seed}}, "--seed");
     const synth::GenerationReport r = synth::generate_scene(d, options);
-    std::printf("%s: %d training views (%zu with distractors), %d test views, %dx%d, %zu points, "
-                "%zu observations; %.1f s (render %.1f s, points %.1f s, PNG %.1f s)\n",
-                options.out.c_str(), r.num_train, r.cluttered_views.size(), r.num_test, d.camera.width,
-                d.camera.height, r.num_points, r.num_observations, r.seconds, r.render_seconds, r.points_seconds,
-                r.write_seconds);
+    std::printf(
+        "%s: %d training views (%zu with distractors), %d test views, %dx%d, %zu points, "
+        "%zu observations; %.1f s (render %.1f s, points %.1f s, PNG %.1f s)\n",
+        options.out.c_str(), r.num_train, r.cluttered_views.size(), r.num_test, d.camera.width, d.camera.height,
+        r.num_points, r.num_observations, r.seconds, r.render_seconds, r.points_seconds, r.write_seconds);
   } catch (const std::exception& e) {
     std::fflush(stdout);
     std::fprintf(stderr, "desplat_synth: error: %s\n", e.what());

@@ -56,8 +56,7 @@ int main(int argc, char** argv) {
                  "exactly N initial distractor Gaussians per training view (default: 1000 per 504x378 "
                  "pixels, the paper's density, scaled with the training image size)")
       ->check(desplat::apps::integer_in(0, 10000000));
-  app.add_flag("--no-distractor-density", o.no_distractor_density,
-               "ablation: never split/duplicate/cull distractors");
+  app.add_flag("--no-distractor-density", o.no_distractor_density, "ablation: never split/duplicate/cull distractors");
   app.add_flag("--no-regularization", o.no_regularization, "ablation: drop the two opacity regularizers");
   app.add_flag("--resume", o.resume,
                "continue from --out/checkpoint.ckpt with the settings in --out/config.json; only --iterations "
@@ -79,11 +78,14 @@ int main(int argc, char** argv) {
   std::string split_rule = "every-nth";
   desplat::apps::add_split_options(app, o.split, split_rule);
   app.add_option("--eval-every", o.eval_every, "evaluate test views every N steps (0: only at the end)")
-      ->check(desplat::apps::integer_in(0, INT32_MAX))->capture_default_str();
+      ->check(desplat::apps::integer_in(0, INT32_MAX))
+      ->capture_default_str();
   app.add_option("--checkpoint-every", o.checkpoint_every, "write a checkpoint every N steps (0: only at the end)")
-      ->check(desplat::apps::integer_in(0, INT32_MAX))->capture_default_str();
+      ->check(desplat::apps::integer_in(0, INT32_MAX))
+      ->capture_default_str();
   app.add_option("--log-every", o.log_every, "when not on a terminal, print a progress line every N steps")
-      ->check(desplat::apps::integer_in(1, INT32_MAX))->capture_default_str();
+      ->check(desplat::apps::integer_in(1, INT32_MAX))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (o.data_dir.empty() && o.images_dir.empty()) {
     std::fprintf(stderr, "desplat_train: give --data DIR (COLMAP scene) or --images DIR (photos)\n");

@@ -24,8 +24,7 @@ inline CLI::Validator integer_in(int64_t lo, int64_t hi) {
         } catch (const std::exception&) {
           parsed = false;
         }
-        if (!parsed || used != text.size())
-          return "must be " + allowed + ", written in digits (got '" + text + "')";
+        if (!parsed || used != text.size()) return "must be " + allowed + ", written in digits (got '" + text + "')";
         if (v < lo || v > hi) return "must be " + allowed + " (got " + text + ")";
         return {};
       },

@@ -28,8 +28,8 @@
 
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/ply.hpp"
-#include "desplat/train/init.hpp"
 #include "desplat/raster/raster.hpp"
+#include "desplat/train/init.hpp"
 
 namespace {
 
@@ -73,8 +73,8 @@ Scene fox_scene() {
   for (const auto& [image_id, im] : model.images) {
     (void)image_id;
     Eigen::Quaterniond q(im.qvec_wxyz[0], im.qvec_wxyz[1], im.qvec_wxyz[2], im.qvec_wxyz[3]);
-    const Eigen::Vector3d c = -(q.normalized().toRotationMatrix().transpose() *
-                                Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2]));
+    const Eigen::Vector3d c =
+        -(q.normalized().toRotationMatrix().transpose() * Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2]));
     centers.push_back({c[0], c[1], c[2]});
   }
   std::array<double, 3> mean{0, 0, 0};
@@ -101,8 +101,8 @@ Scene fox_scene() {
   const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
   // Normalized frame: p_cam = R (x/scale + mean) + t = (R/scale) x + (R mean + t); keep
   // R orthonormal by scaling the camera-space units instead (depths scale by `scale`).
-  const Eigen::Vector3d t = (R * Eigen::Vector3d(mean[0], mean[1], mean[2]) +
-                             Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2])) * scale;
+  const Eigen::Vector3d t =
+      (R * Eigen::Vector3d(mean[0], mean[1], mean[2]) + Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2])) * scale;
   s.camera.width = static_cast<int>(cam.width);
   s.camera.height = static_cast<int>(cam.height);
   s.camera.fx = float(cam.params[0]);  // OPENCV: fx fy cx cy k1 k2 p1 p2 (distortion ignored here)

@@ -60,8 +60,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       read_config(text);
     } else {
       fuzz::write_input(scratch().input, data, size);
-      if (kReader == "scene") (void)synth::load_description(scratch().input);
-      else (void)read_bench_grid(scratch().input);
+      if (kReader == "scene")
+        (void)synth::load_description(scratch().input);
+      else
+        (void)read_bench_grid(scratch().input);
     }
   } catch (const std::invalid_argument&) {
   } catch (const std::runtime_error&) {  // SynthError

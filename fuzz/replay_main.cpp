@@ -36,7 +36,9 @@ std::string mutated(std::string s, std::mt19937& rng) {
       case 0:
         if (!s.empty()) s[at % s.size()] ^= char(1u << (rng() % 8));
         break;
-      case 1: s.insert(at, 1, char(rng() % 256)); break;
+      case 1:
+        s.insert(at, 1, char(rng() % 256));
+        break;
       case 2:
         if (!s.empty()) s.erase(at % s.size(), 1 + rng() % 8);
         break;
@@ -46,10 +48,13 @@ std::string mutated(std::string s, std::mt19937& rng) {
           s.insert(at, s.substr(from, 1 + rng() % 32));
         }
         break;
-      case 4: s.insert(at, std::string(1 + rng() % 2000, rng() % 2 ? '[' : '{')); break;
+      case 4:
+        s.insert(at, std::string(1 + rng() % 2000, rng() % 2 ? '[' : '{'));
+        break;
       default: {
-        static const char* const tokens[] = {"-1", "1e999", "null", "\"\"", "[]", "{}", "true", "-9223372036854775809",
-                                             "18446744073709551616", "0.5", "\"\\u0000\""};
+        static const char* const tokens[] = {
+            "-1",  "1e999",      "null", "\"\"", "[]", "{}", "true", "-9223372036854775809", "18446744073709551616",
+            "0.5", "\"\\u0000\""};
         s.insert(at, tokens[rng() % (sizeof tokens / sizeof *tokens)]);
       }
     }

@@ -46,7 +46,7 @@ RasterGradients random_grads(std::mt19937& rng, const GaussianSet& g) {
 
 TEST(Adam, MatchesPyTorchPerGroupAndSkipsInactiveBands) {
   std::mt19937 rng(5);
-  const size_t n = 1300;  // several of the update's row blocks
+  const size_t n = 1300;                        // several of the update's row blocks
   TrainableGaussians t(random_set(rng, n, 1));  // 12 colour floats: DC + 3 band-1 coefficients
   const GaussianSet start = t.params;
   LearningRates lr;
@@ -176,8 +176,8 @@ TEST(Adam, ReportsTheRowsAndGroupsThatWentNonFinite) {
   std::mt19937 rng(6);
   TrainableGaussians t(random_set(rng, 1100, 0));
   RasterGradients grads = random_grads(rng, t.params);
-  grads.quats[4 * 700 + 2] = INFINITY;         // row 700, quats
-  grads.opacity_logits[3] = NAN;               // row 3, opacity
+  grads.quats[4 * 700 + 2] = INFINITY;                    // row 700, quats
+  grads.opacity_logits[3] = NAN;                          // row 3, opacity
   t.adam_v[int(ParamGroup::Means)][3 * 1099] = INFINITY;  // row 1099, a moment
   t.adam_update(grads, LearningRates{}, AdamSettings{});
   ASSERT_EQ(t.nonfinite_groups.size(), 1100u);

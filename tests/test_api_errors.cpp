@@ -27,7 +27,8 @@ GaussianSet good_gaussians() {
   return g;
 }
 
-template <typename F> std::string error_of(F&& f) {
+template <typename F>
+std::string error_of(F&& f) {
   try {
     f();
   } catch (const std::invalid_argument& e) {

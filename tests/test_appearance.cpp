@@ -120,7 +120,10 @@ double reference_loss(const Fixture& f, const std::vector<double>& mlp, const st
   return loss;
 }
 
-template <class T> std::vector<double> as_double(const std::vector<T>& v) { return {v.begin(), v.end()}; }
+template <class T>
+std::vector<double> as_double(const std::vector<T>& v) {
+  return {v.begin(), v.end()};
+}
 
 // The hand-written backward (float) against central differences of the double reference.
 TEST(Appearance, BackwardMatchesFiniteDifferencesOfADoubleReference) {
@@ -227,7 +230,8 @@ TEST(Appearance, MismatchedSizesAreClearErrors) {
                   "carry 0 features each, the model expects 6");
   AppearanceSettings bad = f.model.settings;
   bad.hidden_width = 0;
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { bad.validate(); }), "appearance.hidden_width must be > 0");
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { bad.validate(); }),
+                  "appearance.hidden_width must be > 0");
 }
 
 // The two-stage forward is the one-stage forward; rgb_scale is the chain rule. Reference: the
@@ -256,7 +260,8 @@ TEST(Appearance, RasterizerStagesAndRgbScaleMatchAnEquivalentShModel) {
   GaussianSet half = g;
   for (size_t i = 0; i < g.size(); ++i)
     for (int k = 0; k < 12; ++k)
-      half.colors[12 * i + k] = k < 3 ? float(0.5 * g.colors[12 * i + k] - 0.25 / kShBand0) : 0.5f * g.colors[12 * i + k];
+      half.colors[12 * i + k] =
+          k < 3 ? float(0.5 * g.colors[12 * i + k] - 0.25 / kShBand0) : 0.5f * g.colors[12 * i + k];
   RasterOutput scaled, reference;
   rasterize_project(g.view(), cam, rs, scaled);
   for (float& c : scaled.rgb) c *= 0.5f;
@@ -338,13 +343,15 @@ std::vector<float> left_half(const Camera& cam) {
   return left;
 }
 
-std::string brute_force_best_look(const Trainer& t, const Camera& cam, const FloatImage& photo, const TrainConfig& cfg) {
+std::string brute_force_best_look(const Trainer& t, const Camera& cam, const FloatImage& photo,
+                                  const TrainConfig& cfg) {
   const std::vector<float> left = left_half(cam);
   double best = std::numeric_limits<double>::infinity();
   std::string name;
   for (size_t j = 0; j < t.data().train.size(); ++j) {
     const FloatImage img = t.render(cam, cfg.eval_background, t.training_look(j));
-    const double loss = photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, cfg.ssim_lambda, {}, left).loss;
+    const double loss =
+        photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, cfg.ssim_lambda, {}, left).loss;
     if (loss < best) best = loss, name = t.data().train[j].name;
   }
   return name;
@@ -376,7 +383,8 @@ TEST(Appearance, TheFitStartsFromTheTrainingLookThatFitsTheLeftHalfBest) {
   for (int y = 0; y < big.camera.height; ++y)
     for (int x = 0; x < big.camera.width; ++x)
       for (int c = 0; c < 3; ++c)
-        big.image.pixels[(size_t(y) * big.camera.width + x) * 3 + c] = v.image.pixels[(size_t(y / 4) * v.camera.width + x / 4) * 3 + c];
+        big.image.pixels[(size_t(y) * big.camera.width + x) * 3 + c] =
+            v.image.pixels[(size_t(y / 4) * v.camera.width + x / 4) * 3 + c];
   ASSERT_GT(std::max(big.camera.width, big.camera.height), kLookSearchPixels);
   const Camera judged = downscale_camera(big.camera, 2);
   ASSERT_LE(std::max(judged.width, judged.height), kLookSearchPixels);

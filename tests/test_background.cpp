@@ -192,9 +192,8 @@ TEST(Background, ANewModelIsUniformMidGrey) {
   BackgroundPass pass;
   pass.forward(m, m.embedding(3), look_at_camera(0.2f, 1.0f, 16, 12), 4, 2);
   for (float v : pass.image) EXPECT_EQ(v, 0.5f);
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] {
-                    pass.forward(m, std::vector<float>(3, 0.0f), look_at_camera(0.2f, 1.0f, 16, 12), 4, 1);
-                  }),
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
+                      [&] { pass.forward(m, std::vector<float>(3, 0.0f), look_at_camera(0.2f, 1.0f, 16, 12), 4, 1); }),
                   "the image embedding has 3 values, the model expects 32");
 }
 
@@ -284,7 +283,8 @@ TrainingData sky_views(unsigned seed) {
         for (int x = 0; x < v.camera.width; ++x) {
           const std::array<float, 3> d = pixel_ray_direction(v.camera, x, y);
           const float up = std::clamp(-d[1] * 2.0f + 0.3f, 0.0f, 1.0f), side = 0.1f * d[0];
-          const float sky[3] = {0.85f - 0.55f * up + side + shift, 0.88f - 0.4f * up + side + shift, 0.95f - 0.1f * up + shift};
+          const float sky[3] = {0.85f - 0.55f * up + side + shift, 0.88f - 0.4f * up + side + shift,
+                                0.95f - 0.1f * up + shift};
           const size_t p = size_t(y) * v.camera.width + x;
           for (int c = 0; c < 3; ++c) photo.pixels[3 * p + c] = out.color[3 * p + c] + (1 - out.alpha[p]) * sky[c];
         }

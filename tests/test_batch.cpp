@@ -190,8 +190,10 @@ TEST(Batch, DistractorsAndEmbeddingsOfOnlyTheBatchsViewsChange) {
                                    t.appearance().image_embeddings.begin() + v * dim);
     // The MLP's last layer starts at zero, so the batch's first view has no embedding gradient
     // yet; the second and third views see the MLP its update left.
-    if (!in_batch) EXPECT_FALSE(moved) << "view " << v;
-    else if (int(v) != t.view_order[0]) EXPECT_TRUE(moved) << "view " << v;
+    if (!in_batch)
+      EXPECT_FALSE(moved) << "view " << v;
+    else if (int(v) != t.view_order[0])
+      EXPECT_TRUE(moved) << "view " << v;
   }
 }
 

@@ -5,15 +5,15 @@
 #include <cmath>
 #include <fstream>
 
-#include "desplat/jobs/bench_run.hpp"
-#include "desplat/train/presets.hpp"
-#include "desplat/jobs/clutter_summary.hpp"
-#include "desplat/jobs/report.hpp"
-#include "support/expect.hpp"
 #include "desplat/eval/plot.hpp"
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/image_io.hpp"
+#include "desplat/jobs/bench_run.hpp"
+#include "desplat/jobs/clutter_summary.hpp"
+#include "desplat/jobs/report.hpp"
 #include "desplat/synth/synth.hpp"
+#include "desplat/train/presets.hpp"
+#include "support/expect.hpp"
 
 namespace desplat {
 namespace {
@@ -207,7 +207,8 @@ TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
   EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x"}], "score_at": "half"})").find("score_at"),
             std::string::npos);
   EXPECT_NE(error_of("{").find((dir / "g.json").string()), std::string::npos);
-  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "preset": "quick"}]})").find("run 'x': unknown preset 'quick'"),
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "preset": "quick"}]})")
+                .find("run 'x': unknown preset 'quick'"),
             std::string::npos);
   fs::remove_all(dir);
 }
@@ -252,7 +253,8 @@ TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {
   const fs::path dir = temp_dir("e2e");
   synth::GenerateOptions g;
   g.out = dir / "tiny";
-  synth::generate_scene(synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_distractors.json"), g);
+  synth::generate_scene(synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_distractors.json"),
+                        g);
   std::ofstream(dir / "grid.json") << R"({
     "scenes": ["tiny"], "steps": 20, "eval_every": 10, "threads": 2,
     "runs": [{"name": "DeSplat", "config": {"num_downscales": 0}},
@@ -260,7 +262,8 @@ TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {
   const BenchGrid grid = read_bench_grid(dir / "grid.json");
   std::atomic<bool> stop{false};
   int reported = 0;
-  const std::vector<BenchPoint> points = run_bench(grid, dir / "out", false, stop, [&](const BenchPoint&) { ++reported; });
+  const std::vector<BenchPoint> points =
+      run_bench(grid, dir / "out", false, stop, [&](const BenchPoint&) { ++reported; });
   ASSERT_EQ(points.size(), 4u);  // two runs × steps 10 and 20
   EXPECT_EQ(reported, 4);
   for (const BenchPoint& p : points) {
@@ -282,14 +285,16 @@ TEST(Bench, TinyGridWritesCurvesPlotsAndResumes) {
   EXPECT_EQ(page.plots, 2) << page.note;
   const std::string html = testing::slurp(page.path);
   size_t frames = 0;
-  for (size_t at = html.find("<iframe class=\"plot\""); at != std::string::npos; at = html.find("<iframe class=\"plot\"", at + 1))
+  for (size_t at = html.find("<iframe class=\"plot\""); at != std::string::npos;
+       at = html.find("<iframe class=\"plot\"", at + 1))
     ++frames;
   EXPECT_EQ(frames, 2u);
   for (const BenchPoint& p : points) EXPECT_NE(html.find("<td>" + p.run + "</td>"), std::string::npos) << p.run;
   EXPECT_FALSE(fs::exists(dir / "out" / ".report_tmp"));
   // Resuming with everything finished trains nothing and keeps every point.
   reported = 0;
-  const std::vector<BenchPoint> again = run_bench(grid, dir / "out", true, stop, [&](const BenchPoint&) { ++reported; });
+  const std::vector<BenchPoint> again =
+      run_bench(grid, dir / "out", true, stop, [&](const BenchPoint&) { ++reported; });
   EXPECT_EQ(reported, 0);
   EXPECT_EQ(again.size(), 4u);
   fs::remove_all(dir);

@@ -23,7 +23,8 @@ namespace {
 TEST(ByteImage, EveryByteOfAnEightBitFileSurvivesTheRoundTrip) {
   testing::TempDir dir("byte_image");
   std::vector<uint8_t> bytes(256 * 3);
-  for (int b = 0; b < 256; ++b) bytes[3 * b] = uint8_t(b), bytes[3 * b + 1] = uint8_t(255 - b), bytes[3 * b + 2] = uint8_t(b / 2);
+  for (int b = 0; b < 256; ++b)
+    bytes[3 * b] = uint8_t(b), bytes[3 * b + 1] = uint8_t(255 - b), bytes[3 * b + 2] = uint8_t(b / 2);
   const auto path = dir.path() / "all.png";
   auto out = OIIO::ImageOutput::create(path.string());
   ASSERT_TRUE(out);
@@ -78,7 +79,8 @@ TEST(ByteImage, DownscaleIsTheRoundedBlockMean) {
         for (int c = 0; c < 3; ++c) {
           double sum = 0;
           for (int dy = 0; dy < factor; ++dy)
-            for (int dx = 0; dx < factor; ++dx) sum += img.pixels[(size_t(y * factor + dy) * 37 + x * factor + dx) * 3 + c];
+            for (int dx = 0; dx < factor; ++dx)
+              sum += img.pixels[(size_t(y * factor + dy) * 37 + x * factor + dx) * 3 + c];
           const int want = int(std::floor(sum / (factor * factor) + 0.5));
           EXPECT_EQ(int(small.pixels[(size_t(y) * small.width + x) * 3 + c]), want) << factor << " " << x << "," << y;
         }
@@ -128,7 +130,8 @@ TEST(ByteImage, LoadingADeeperPhotoWarnsThatItIsRounded) {
   EXPECT_CONTAINS(warnings[0], "1 of 8 photos (first: view_1.png) hold more than 8 bits per channel");
   EXPECT_CONTAINS(warnings[0], "rounds them to 8 bits");
   ASSERT_EQ(sixteen.train.size(), eight.train.size());
-  for (size_t v = 0; v < eight.train.size(); ++v) EXPECT_EQ(sixteen.train[v].image.pixels, eight.train[v].image.pixels) << v;
+  for (size_t v = 0; v < eight.train.size(); ++v)
+    EXPECT_EQ(sixteen.train[v].image.pixels, eight.train[v].image.pixels) << v;
 }
 
 }  // namespace

@@ -138,9 +138,8 @@ TEST(CameraModels, SpecialCasesOfOpenCVModelsMatchOpenCV) {
   expect_matches_opencv(make(CameraModelId::RadialFisheye, {f, cx, cy, 0.04, -0.01}),
                         make(CameraModelId::OpenCVFisheye, {f, f, cx, cy, 0.04, -0.01, 0, 0}), 1.5);
   // Thin prism without tangential and prism terms is the equidistant fisheye with k1..k4.
-  expect_matches_opencv(
-      make(CameraModelId::ThinPrismFisheye, {f, 505, cx, cy, 0.05, -0.01, 0, 0, 0.003, -0.001, 0, 0}),
-      make(CameraModelId::OpenCVFisheye, {f, 505, cx, cy, 0.05, -0.01, 0.003, -0.001}), 1.5);
+  expect_matches_opencv(make(CameraModelId::ThinPrismFisheye, {f, 505, cx, cy, 0.05, -0.01, 0, 0, 0.003, -0.001, 0, 0}),
+                        make(CameraModelId::OpenCVFisheye, {f, 505, cx, cy, 0.05, -0.01, 0.003, -0.001}), 1.5);
 }
 
 TEST(CameraModels, ThinPrismTangentialAndPrismTermsFollowTheirFormula) {
@@ -166,7 +165,8 @@ TEST(CameraModels, FovModelFollowsDevernayFaugeras) {
   for (const Vec2& uv : plane_grid(0.7)) {
     const double r = std::hypot(uv[0], uv[1]);
     // r_d = atan(2·r·tan(ω/2)) / ω; its limit at r = 0 is 2·tan(ω/2)/ω.
-    const double factor = r > 0 ? std::atan(2 * r * std::tan(omega / 2)) / (omega * r) : 2 * std::tan(omega / 2) / omega;
+    const double factor =
+        r > 0 ? std::atan(2 * r * std::tan(omega / 2)) / (omega * r) : 2 * std::tan(omega / 2) / omega;
     const Vec2 px = image_from_camera(cam, uv);
     // COLMAP's Taylor branch for r² < 1e-4 is accurate to O(r⁴) ≈ 1e-8 relative there.
     const double tol = r * r < 1e-4 ? 1e-5 : 1e-9;

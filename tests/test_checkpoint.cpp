@@ -189,16 +189,15 @@ TEST_F(CheckpointFormat, RngStateRestoresTheSameDraws) {
   EXPECT_EQ(restored, engine);
   for (int i = 0; i < 10000; ++i) ASSERT_EQ(restored(), engine()) << "draw " << i;
   for (int i = 0; i < 100; ++i)
-    ASSERT_EQ(std::bit_cast<std::uint64_t>(restored_gauss(restored)),
-              std::bit_cast<std::uint64_t>(gauss(engine)));
+    ASSERT_EQ(std::bit_cast<std::uint64_t>(restored_gauss(restored)), std::bit_cast<std::uint64_t>(gauss(engine)));
 }
 
 TEST(CheckpointRng, MalformedStateIsRejectedAndTheEngineKept) {
   std::mt19937_64 engine(7);
   const std::mt19937_64 before = engine;
   const std::string good = save_rng_state(engine);
-  for (const std::string& bad : {std::string(), std::string("1 2 3"), good.substr(0, good.size() / 2),
-                                 good + " 99", std::string("not a number")}) {
+  for (const std::string& bad : {std::string(), std::string("1 2 3"), good.substr(0, good.size() / 2), good + " 99",
+                                 std::string("not a number")}) {
     EXPECT_THROW(restore_rng_state(engine, bad), CheckpointError) << bad.substr(0, 40);
     EXPECT_EQ(engine, before);
   }
@@ -219,7 +218,9 @@ TEST_F(CheckpointFormat, AccessorsNameTheFileTheArrayAndTheExpectation) {
   EXPECT_EQ(message([&] { r.get<float>("static/scales"); }), prefix + "'static/scales' is missing");
   EXPECT_EQ(message([&] { r.get<std::int32_t>("static/means"); }),
             prefix + "'static/means' holds float32, expected int32");
-  EXPECT_EQ(message([&] { r.get<float>("static/means", {3, 2}); }),
+  EXPECT_EQ(message([&] {
+              r.get<float>("static/means", {3, 2});
+            }),
             prefix + "'static/means' has shape [2, 3], expected [3, 2]");
   EXPECT_THAT(message([&] { Checkpoint().get<float>("x"); }), StartsWith("checkpoint: array 'x'"));
 }

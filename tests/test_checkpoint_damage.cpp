@@ -17,8 +17,7 @@ TEST_F(CheckpointCorruption, FileLevelProblems) {
   EXPECT_THAT(read_error(dir_), HasSubstr("not a regular file"));
 
   write_bytes(file("empty.ckpt"), "");
-  EXPECT_THAT(read_error(file("empty.ckpt")),
-              HasSubstr("truncated: 0 bytes, shorter than the 24-byte file header"));
+  EXPECT_THAT(read_error(file("empty.ckpt")), HasSubstr("truncated: 0 bytes, shorter than the 24-byte file header"));
 
   RawFile f = raw_valid();
   f.magic = "PK\x03\x04zip!";
@@ -84,9 +83,8 @@ TEST_F(CheckpointCorruption, SectionHeaderProblems) {
   RawFile f = raw_valid();
   f.sections[1].payload_size = 28;  // [2, 3] float32 is 24 bytes
   f.sections[1].payload += "pad!";
-  EXPECT_THAT(error_for("size.ckpt", f),
-              HasSubstr("section 'a': shape [2, 3] of 4-byte elements needs 24 bytes, "
-                        "but the section declares 28"));
+  EXPECT_THAT(error_for("size.ckpt", f), HasSubstr("section 'a': shape [2, 3] of 4-byte elements needs 24 bytes, "
+                                                   "but the section declares 28"));
 
   f = raw_valid();
   f.sections[2].type = 9;
@@ -100,8 +98,7 @@ TEST_F(CheckpointCorruption, SectionHeaderProblems) {
 
   f = raw_valid();
   f.sections[1].name = "";
-  EXPECT_THAT(error_for("noname.ckpt", f),
-              HasSubstr("section #1 (offset 70): name length 0 is not in 1..255"));
+  EXPECT_THAT(error_for("noname.ckpt", f), HasSubstr("section #1 (offset 70): name length 0 is not in 1..255"));
   f.sections[1].name = "a b";
   EXPECT_THAT(error_for("space.ckpt", f), HasSubstr("invalid section name"));
   f.sections[1].name = "b";
@@ -110,8 +107,7 @@ TEST_F(CheckpointCorruption, SectionHeaderProblems) {
   std::string flipped = raw_valid().bytes();
   flipped[70 + 13] ^= 0x10;  // a dims byte of section #1
   write_bytes(file("hcrc.ckpt"), flipped);
-  EXPECT_THAT(read_error(file("hcrc.ckpt")),
-              HasSubstr("section #1 (offset 70): header checksum mismatch (stored 0x"));
+  EXPECT_THAT(read_error(file("hcrc.ckpt")), HasSubstr("section #1 (offset 70): header checksum mismatch (stored 0x"));
 }
 
 TEST_F(CheckpointCorruption, MetadataProblems) {
@@ -121,8 +117,7 @@ TEST_F(CheckpointCorruption, MetadataProblems) {
   };
   RawFile f = raw_valid();
   f.sections.erase(f.sections.begin());
-  EXPECT_THAT(error_for("nometa.ckpt", f),
-              HasSubstr("the first section must be the metadata, found 'a' of type 1"));
+  EXPECT_THAT(error_for("nometa.ckpt", f), HasSubstr("the first section must be the metadata, found 'a' of type 1"));
   f = raw_valid();
   f.sections[0] = raw_metadata("{\"step\": ");
   EXPECT_THAT(error_for("json.ckpt", f), HasSubstr("metadata is not valid JSON"));
@@ -162,8 +157,7 @@ TEST_F(CheckpointCorruption, EveryTruncationIsReported) {
   const std::string bytes = read_bytes(good);
   for (std::size_t len = 0; len < bytes.size(); ++len) {
     write_bytes(cut, bytes.substr(0, len));
-    ASSERT_THAT(read_error(cut), HasSubstr("truncated"))
-        << "prefix of " << len << " of " << bytes.size() << " bytes";
+    ASSERT_THAT(read_error(cut), HasSubstr("truncated")) << "prefix of " << len << " of " << bytes.size() << " bytes";
   }
 }
 
@@ -229,8 +223,7 @@ struct CrashScene {
   }
   // The old checkpoint is in place, byte for byte, and loads bit-exactly.
   void expect_old_intact() const {
-    ASSERT_TRUE(read_bytes(path) == old_bytes)
-        << "the old checkpoint was modified or replaced by a partial file";
+    ASSERT_TRUE(read_bytes(path) == old_bytes) << "the old checkpoint was modified or replaced by a partial file";
     expect_same(read_checkpoint(path), old_ckpt);
   }
 };
@@ -243,8 +236,7 @@ TEST_F(CheckpointCrash, WriterKilledAtExactBytePositionsLeavesTheOldCheckpoint) 
   const std::uintmax_t total = scene.new_bytes.size();
   ASSERT_GT(total, 45u << 20) << "the new checkpoint should be about 50 MB";
   using U = std::uintmax_t;
-  for (U limit : {U{0}, U{1}, U{23}, U{24}, U{100}, total / 4, total / 2, 3 * total / 4, total - 4,
-                  total - 1}) {
+  for (U limit : {U{0}, U{1}, U{23}, U{24}, U{100}, total / 4, total / 2, 3 * total / 4, total - 4, total - 1}) {
     SCOPED_TRACE("killed after " + std::to_string(limit) + " of " + std::to_string(total) + " bytes");
     const pid_t pid = spawn_writer(scene.path, scene.new_ckpt, [limit] {
       const rlimit fsize{limit, limit};
@@ -294,8 +286,7 @@ TEST_F(CheckpointCrash, WriterSigkilledDuringTheWriteLeavesTheOldCheckpoint) {
         ++mid_write_kills;
         break;
       }
-      ASSERT_TRUE(read_bytes(scene.path) == scene.new_bytes)
-          << "renamed, so it must be the complete new file";
+      ASSERT_TRUE(read_bytes(scene.path) == scene.new_bytes) << "renamed, so it must be the complete new file";
       write_checkpoint(scene.path, scene.old_ckpt);  // too late this time; set up again and retry
     }
   }
@@ -330,13 +321,12 @@ TEST_F(CheckpointCrash, FailedWriteMidStreamLeavesTheOldCheckpointAndNoTemporary
   ::close(fds[1]);
   std::string message;
   char buf[512];
-  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;)
-    message.append(buf, static_cast<std::size_t>(n));
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) message.append(buf, static_cast<std::size_t>(n));
   ::close(fds[0]);
   const int status = wait_for(pid);
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "status " << status;
-  EXPECT_THAT(message, AllOf(StartsWith(scene.path.string() + ": write to temporary file"),
-                             HasSubstr("File too large")));
+  EXPECT_THAT(message,
+              AllOf(StartsWith(scene.path.string() + ": write to temporary file"), HasSubstr("File too large")));
   scene.expect_old_intact();
   EXPECT_FALSE(fs::exists(tmp_of(scene.path)));
 }

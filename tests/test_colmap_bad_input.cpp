@@ -50,8 +50,7 @@ TEST_F(ColmapBadBinary, TruncatedCamerasAtEveryLength) {
     spit(cameras_, good.substr(0, len));
     const std::string msg = error_of([&] { read_model_binary(dir_); });
     EXPECT_NE(msg.find(cameras_.string()), std::string::npos) << len << ": " << msg;
-    EXPECT_TRUE(msg.find("truncated") != std::string::npos ||
-                msg.find("count of cameras") != std::string::npos)
+    EXPECT_TRUE(msg.find("truncated") != std::string::npos || msg.find("count of cameras") != std::string::npos)
         << len << ": " << msg;
   }
   spit(cameras_, good.substr(0, 90));  // inside the 8th param (bytes 88..96)
@@ -64,8 +63,7 @@ TEST_F(ColmapBadBinary, TruncatedLastRecords) {
   read_expecting(images_, {"image record 50 of 50", "count of points2D", "truncated file"});
   copy_fox(dir_);
   edit(points_, [](std::string& b) { b.resize(b.size() - 1); });
-  read_expecting(points_, {"point3D record 12421 of 12421", "count of track elements",
-                           "truncated file"});
+  read_expecting(points_, {"point3D record 12421 of 12421", "count of track elements", "truncated file"});
 }
 
 TEST_F(ColmapBadBinary, HugeCountsAreRejectedBeforeAllocating) {
@@ -169,8 +167,7 @@ TEST_F(ColmapBadBinary, DuplicateIds) {
 TEST_F(ColmapBadBinary, ImageWithUnknownCamera) {
   const uint32_t first_id = peek<uint32_t>(slurp(images_), 8);
   edit(images_, [](std::string& b) { patch(b, 8 + 60, uint32_t{7}); });
-  read_expecting(images_, {"image " + std::to_string(first_id) + ": camera_id 7 is not in " +
-                           cameras_.string()});
+  read_expecting(images_, {"image " + std::to_string(first_id) + ": camera_id 7 is not in " + cameras_.string()});
 }
 
 TEST_F(ColmapBadBinary, TrailingGarbage) {
@@ -261,8 +258,7 @@ class ColmapBadText : public ::testing::Test {
 TEST_F(ColmapBadText, BaseFilesAreValid) {
   const Model m = read_model_text(tmp_.path());
   EXPECT_EQ(m.cameras.at(2).params, (std::vector<double>{500, 320, 240, 0.01}));
-  EXPECT_EQ(m.images.at(1).points2d,
-            (std::vector<Observation>{{10, 20, 7}, {30, 40, kNoPoint3D}}));
+  EXPECT_EQ(m.images.at(1).points2d, (std::vector<Observation>{{10, 20, 7}, {30, 40, kNoPoint3D}}));
   EXPECT_EQ(m.points.at(7).track, (std::vector<TrackElement>{{1, 0}, {2, 0}}));
   EXPECT_EQ(m.points.at(7).rgb, (std::array<uint8_t, 3>{255, 0, 10}));
 }

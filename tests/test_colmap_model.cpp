@@ -24,12 +24,10 @@ TEST(ColmapCameraModels, TableMatchesColmapIdsNamesAndParamCounts) {
     EXPECT_EQ(info.num_params, e.num_params) << e.name;
     // The names list has one entry per parameter.
     const std::string_view names = info.param_names;
-    EXPECT_EQ(1 + std::count(names.begin(), names.end(), ','), e.num_params)
-        << e.name << ": " << names;
+    EXPECT_EQ(1 + std::count(names.begin(), names.end(), ','), e.num_params) << e.name << ": " << names;
     EXPECT_EQ(camera_model_from_name(e.name), static_cast<CameraModelId>(e.id));
   }
-  EXPECT_STREQ(camera_model_info(CameraModelId::OpenCV).param_names,
-               "fx, fy, cx, cy, k1, k2, p1, p2");
+  EXPECT_STREQ(camera_model_info(CameraModelId::OpenCV).param_names, "fx, fy, cx, cy, k1, k2, p1, p2");
   EXPECT_EQ(camera_model_from_name("opencv"), std::nullopt);  // names are case-sensitive
   EXPECT_EQ(camera_model_from_name("RAD_TAN"), std::nullopt);
   const std::string msg = error_of([] { camera_model_info(static_cast<CameraModelId>(11)); });
@@ -48,25 +46,22 @@ TEST(ColmapFox, BinaryHasDocumentedCountsAndValues) {
   EXPECT_EQ(cam.model, CameraModelId::OpenCV);
   EXPECT_EQ(cam.width, 540u);
   EXPECT_EQ(cam.height, 960u);
-  const std::vector<double> params = {687.79631263596787,     687.33247019469366,
-                                      270,                    480,
-                                      0.056082542834516767,   -0.077665473853303135,
-                                      -0.001721713212307322,  -0.0024992501696264402};
+  const std::vector<double> params = {
+      687.79631263596787,    687.33247019469366,    270, 480, 0.056082542834516767, -0.077665473853303135,
+      -0.001721713212307322, -0.0024992501696264402};
   EXPECT_EQ(cam.params, params);
 
   const Image& img = m.images.at(50);
   EXPECT_EQ(img.name, "0115.jpg");
   EXPECT_EQ(img.camera_id, 1u);
-  EXPECT_EQ(img.qvec_wxyz, (std::array<double, 4>{0.99507498014221873, -0.09450346887353521,
-                                                  0.011691374697975812, -0.027535250561839222}));
-  EXPECT_EQ(img.tvec, (std::array<double, 3>{-3.14614344392279, -1.8568607848667402,
-                                             0.45304123320618322}));
+  EXPECT_EQ(img.qvec_wxyz, (std::array<double, 4>{0.99507498014221873, -0.09450346887353521, 0.011691374697975812,
+                                                  -0.027535250561839222}));
+  EXPECT_EQ(img.tvec, (std::array<double, 3>{-3.14614344392279, -1.8568607848667402, 0.45304123320618322}));
   ASSERT_FALSE(img.points2d.empty());
   EXPECT_EQ(img.points2d[0], (Observation{406.67733764648438, 1.4702727794647217, -1}));
 
   const Point3D& pt = m.points.at(11548);
-  EXPECT_EQ(pt.xyz, (std::array<double, 3>{2.7414492142275853, 4.0460018764980825,
-                                           3.7612355408920193}));
+  EXPECT_EQ(pt.xyz, (std::array<double, 3>{2.7414492142275853, 4.0460018764980825, 3.7612355408920193}));
   EXPECT_EQ(pt.rgb, (std::array<uint8_t, 3>{193, 201, 203}));
   EXPECT_EQ(pt.error, 0.63748205236417477);
   EXPECT_EQ(pt.track, (std::vector<TrackElement>{{25, 3718}, {27, 3200}, {29, 3141}, {30, 1113}}));
@@ -198,8 +193,7 @@ TEST(ColmapRoundTrip, WritersRefuseModelsTheReadersWouldReject) {
 
   m = make_model();
   m.images.at(3).name = "two\nlines.jpg";
-  expect_error([&] { write_model_text(m, tmp / "txt"); }, tmp / "txt" / "images.txt",
-               {"line break"});
+  expect_error([&] { write_model_text(m, tmp / "txt"); }, tmp / "txt" / "images.txt", {"line break"});
   EXPECT_FALSE(fs::exists(tmp / "txt"));
 
   m = make_model();

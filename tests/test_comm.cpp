@@ -46,7 +46,8 @@ TEST(SingleProcessCommunicatorDeathTest, AbortEndsTheProcessNamingTheRank) {
               "rank 0: cannot read photo x.jpg");
   // A broadcast from a rank the job does not have is an abort too, never a silent no-op.
   std::vector<std::byte> b(4);
-  EXPECT_EXIT(single_process_communicator()->broadcast(b, 1), testing::ExitedWithCode(1), "rank 0: broadcast from rank 1");
+  EXPECT_EXIT(single_process_communicator()->broadcast(b, 1), testing::ExitedWithCode(1),
+              "rank 0: broadcast from rank 1");
 }
 
 TEST(OpenCommunicator, WithoutALauncherIsOneProcess) {

@@ -13,7 +13,10 @@
 namespace desplat::test {
 namespace {
 
-template <typename T> T clamp01(T v) { return v < T(0) ? T(0) : (v > T(1) ? T(1) : v); }
+template <typename T>
+T clamp01(T v) {
+  return v < T(0) ? T(0) : (v > T(1) ? T(1) : v);
+}
 
 // Per pixel: the gradient of Σ_c w_c·clamp(C_c) with respect to (C_s, A_s, C_d, A_d),
 // exercising values inside [0, 1] and beyond it (the clamp gives zero gradient there).
@@ -108,9 +111,9 @@ std::vector<double> two_layer_jet_gradient(const GaussianSet& s, const GaussianS
     RefGaussians<J> r;
     r.color_mode = g.color_mode;
     r.sh_degree = g.sh_degree;
-    for (auto [dst, src] : {std::pair{&r.means, &g.means}, std::pair{&r.log_scales, &g.log_scales},
-                            std::pair{&r.quats, &g.quats}, std::pair{&r.opacity_logits, &g.opacity_logits},
-                            std::pair{&r.colors, &g.colors}}) {
+    for (auto [dst, src] :
+         {std::pair{&r.means, &g.means}, std::pair{&r.log_scales, &g.log_scales}, std::pair{&r.quats, &g.quats},
+          std::pair{&r.opacity_logits, &g.opacity_logits}, std::pair{&r.colors, &g.colors}}) {
       dst->assign(values.begin() + at, values.begin() + at + src->size());
       at += src->size();
     }
@@ -126,8 +129,9 @@ std::vector<double> two_layer_jet_gradient(const GaussianSet& s, const GaussianS
     J L(0), sum_s(0), sum_d(0);
     for (size_t p = 0; p < P; ++p) {
       for (int c = 0; c < 3; ++c)
-        L += clamp01(composite_unclamped(is.color[3 * p + c], is.alpha[p], id.color[3 * p + c], id.alpha[p],
-                                         J(bg[c]))) * double(w[3 * p + c]);
+        L +=
+            clamp01(composite_unclamped(is.color[3 * p + c], is.alpha[p], id.color[3 * p + c], id.alpha[p], J(bg[c]))) *
+            double(w[3 * p + c]);
       sum_s += J(1) - is.alpha[p];
       sum_d += id.alpha[p];
     }
@@ -173,7 +177,8 @@ TEST(Composite, TwoLayerBackwardMatchesAutodiffThroughReference) {
     // Same budget as the kernel tests (test_backward.cpp): 2e-4 of the largest exact
     // gradient of the set plus 1e-5; a wrong term in the composite is O(1) off.
     const size_t n_static = flatten_params(statics).size();
-    for (auto [lo, hi, name] : {std::tuple{size_t(0), n_static, "static"}, std::tuple{n_static, want.size(), "distractor"}}) {
+    for (auto [lo, hi, name] :
+         {std::tuple{size_t(0), n_static, "static"}, std::tuple{n_static, want.size(), "distractor"}}) {
       double scale = 0;
       for (size_t i = lo; i < hi; ++i) scale = std::max(scale, std::abs(want[i]));
       ASSERT_GT(scale, 0) << name;

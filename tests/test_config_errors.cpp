@@ -25,11 +25,14 @@ TEST(ConfigErrors, DefaultsAndPresetsAreValid) {
 }
 
 TEST(ConfigErrors, ZeroIntervalsThatWouldDivideByZero) {
-  EXPECT_CONTAINS(error_for({{"resolution_schedule", 0}}), "config: resolution_schedule must be an integer in [1, 2147483647] (got 0)");
-  EXPECT_CONTAINS(error_for({{"sh_degree_interval", 0}}), "config: sh_degree_interval must be an integer in [1, 2147483647] (got 0)");
+  EXPECT_CONTAINS(error_for({{"resolution_schedule", 0}}),
+                  "config: resolution_schedule must be an integer in [1, 2147483647] (got 0)");
+  EXPECT_CONTAINS(error_for({{"sh_degree_interval", 0}}),
+                  "config: sh_degree_interval must be an integer in [1, 2147483647] (got 0)");
   EXPECT_CONTAINS(error_for({{"densify", {{"refine_every", 0}, {"warmup", 0}}}}),
                   "config: densify.refine_every must be an integer in [1, 2147483647] (got 0)");
-  EXPECT_CONTAINS(error_for({{"densify", {{"reset_alpha_every", 0}}}}), "densify.reset_alpha_every must be an integer in [1, 2147483647]");
+  EXPECT_CONTAINS(error_for({{"densify", {{"reset_alpha_every", 0}}}}),
+                  "densify.reset_alpha_every must be an integer in [1, 2147483647]");
   EXPECT_CONTAINS(error_for({{"means_lr_decay_steps", 0}}), "means_lr_decay_steps must be an integer in [1, 10^18]");
 }
 
@@ -37,21 +40,31 @@ TEST(ConfigErrors, UselessRatesAndSizes) {
   EXPECT_CONTAINS(error_for({{"lr", {{"means", 0}}}}), "config: lr.means must be a number in (0, 10^18] (got 0)");
   EXPECT_CONTAINS(error_for({{"lr", {{"means", -1e-4}}}}), "lr.means must be a number in (0, 10^18] (got -0.0001)");
   EXPECT_CONTAINS(error_for({{"means_lr_final", -1e-6}}), "means_lr_final must be a number in (0, 10^18]");
-  EXPECT_CONTAINS(error_for({{"lr", {{"quats", -1}}}}), "lr.quats must be a number in [0, 10^18] (0 freezes the group) (got -1)");
+  EXPECT_CONTAINS(error_for({{"lr", {{"quats", -1}}}}),
+                  "lr.quats must be a number in [0, 10^18] (0 freezes the group) (got -1)");
   EXPECT_CONTAINS(error_for({{"ssim_lambda", 5}}), "config: ssim_lambda must be a number in [0, 1] (got 5)");
   EXPECT_CONTAINS(error_for({{"num_downscales", -3}}), "config: num_downscales must be an integer in [0, 10] (got -3)");
-  EXPECT_CONTAINS(error_for({{"random_init_points", 0}}), "config: random_init_points must be an integer in [1, 100000000] (got 0)");
-  EXPECT_CONTAINS(error_for({{"distractors", {{"init_opacity", 1.0}}}}), "distractors.init_opacity must be a number in (0, 0.999]");
-  EXPECT_CONTAINS(error_for({{"eval_background", {0.1, 2.0, 0.2}}}), "eval_background must be three numbers, each in [0, 1] (got 2.0)");
+  EXPECT_CONTAINS(error_for({{"random_init_points", 0}}),
+                  "config: random_init_points must be an integer in [1, 100000000] (got 0)");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"init_opacity", 1.0}}}}),
+                  "distractors.init_opacity must be a number in (0, 0.999]");
+  EXPECT_CONTAINS(error_for({{"eval_background", {0.1, 2.0, 0.2}}}),
+                  "eval_background must be three numbers, each in [0, 1] (got 2.0)");
   EXPECT_CONTAINS(error_for({{"threads", -2}}), "threads must be an integer in [0, 4096] (0: all cores) (got -2)");
-  EXPECT_CONTAINS(error_for({{"background", {{"sh_degree", 5}}}}), "config: background.sh_degree must be an integer in [0, 4] (got 5)");
-  EXPECT_CONTAINS(error_for({{"background", {{"hidden_layers", 0}}}}), "background.hidden_layers must be an integer in [1, 16] (got 0)");
-  EXPECT_CONTAINS(error_for({{"background", {{"explained_share", 1.0}}}}), "background.explained_share must be a number in [0, 1)");
-  EXPECT_CONTAINS(error_for({{"background", {{"lr", {{"mlp", -1}}}}}}), "background.lr.mlp must be a number in [0, 10^18]");
-  EXPECT_CONTAINS(error_for({{"distractors", {{"min_blend_weight", -1}}}}),
-                  "config: distractors.min_blend_weight must be a number in [0, 10^18] (0 turns the rule off) (got -1)");
+  EXPECT_CONTAINS(error_for({{"background", {{"sh_degree", 5}}}}),
+                  "config: background.sh_degree must be an integer in [0, 4] (got 5)");
+  EXPECT_CONTAINS(error_for({{"background", {{"hidden_layers", 0}}}}),
+                  "background.hidden_layers must be an integer in [1, 16] (got 0)");
+  EXPECT_CONTAINS(error_for({{"background", {{"explained_share", 1.0}}}}),
+                  "background.explained_share must be a number in [0, 1)");
+  EXPECT_CONTAINS(error_for({{"background", {{"lr", {{"mlp", -1}}}}}}),
+                  "background.lr.mlp must be a number in [0, 10^18]");
+  EXPECT_CONTAINS(
+      error_for({{"distractors", {{"min_blend_weight", -1}}}}),
+      "config: distractors.min_blend_weight must be a number in [0, 10^18] (0 turns the rule off) (got -1)");
   // Zero where zero is meaningful stays allowed: a frozen group, no regularizer, no cap.
-  EXPECT_NO_THROW(config_from_json({{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
+  EXPECT_NO_THROW(config_from_json(
+      {{"lr", {{"sh_rest", 0}}}, {"distractors", {{"lambda_static", 0}, {"pixels_per_distractor", 0}}}}));
 }
 
 // The pixel-loop instruction set by name: unknown names and paths this CPU lacks are refused.
@@ -72,8 +85,10 @@ TEST(ConfigErrors, KernelIsaMustBeAKnownPathThisCpuRuns) {
 }
 
 TEST(ConfigErrors, OwnedPixelPullSettingsAreCheckedAndRead) {
-  EXPECT_CONTAINS(error_for({{"distractors", {{"lambda_owned", -0.1}}}}), "distractors.lambda_owned must be a number in [0, 10^18]");
-  EXPECT_CONTAINS(error_for({{"distractors", {{"owned_after", -1}}}}), "distractors.owned_after must be an integer in [0, 2147483647]");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"lambda_owned", -0.1}}}}),
+                  "distractors.lambda_owned must be a number in [0, 10^18]");
+  EXPECT_CONTAINS(error_for({{"distractors", {{"owned_after", -1}}}}),
+                  "distractors.owned_after must be an integer in [0, 2147483647]");
   const TrainConfig c = config_from_json({{"distractors", {{"lambda_owned", 0.5}, {"owned_after", 100}}}});
   EXPECT_EQ(c.distractors.lambda_owned, 0.5f);
   EXPECT_EQ(c.distractors.owned_after, 100);

@@ -43,12 +43,12 @@ TrainableGaussians build(const std::vector<Spec>& specs) {
 
 TEST(Density, SplitDuplicateCullDuringDensification) {
   TrainableGaussians t = build({
-      {0.05f, 0.5f, 0.002f, 0.01f},   // 0: high grad, large → split
-      {0.005f, 0.5f, 0.002f, 0.01f},  // 1: high grad, small → duplicate
-      {0.05f, 0.5f, 0.0001f, 0.01f},  // 2: low grad → stays
-      {0.05f, 0.05f, 0.0001f, 0.01f}, // 3: opacity below 0.1 → culled
-      {0.005f, 0.5f, 0.002f, 0.06f},  // 4: small but big on screen (step < 4000) → split, and duplicated
-      {0.015f, 0.5f, 0.002f, 0.01f},  // 5: large → split; 0.015/1.6 ≤ 0.01 → also duplicated
+      {0.05f, 0.5f, 0.002f, 0.01f},    // 0: high grad, large → split
+      {0.005f, 0.5f, 0.002f, 0.01f},   // 1: high grad, small → duplicate
+      {0.05f, 0.5f, 0.0001f, 0.01f},   // 2: low grad → stays
+      {0.05f, 0.05f, 0.0001f, 0.01f},  // 3: opacity below 0.1 → culled
+      {0.005f, 0.5f, 0.002f, 0.06f},   // 4: small but big on screen (step < 4000) → split, and duplicated
+      {0.015f, 0.5f, 0.002f, 0.01f},   // 5: large → split; 0.015/1.6 ≤ 0.01 → also duplicated
   });
   std::mt19937_64 rng(1);
   const RefineReport r = refine_gaussians(t, DensifySettings{}, 700, 100, 10, rng);
@@ -79,7 +79,7 @@ TEST(Density, SplitDuplicateCullDuringDensification) {
     EXPECT_EQ(t.params.features[2 * i], float(dup_parents[d]));
     EXPECT_NEAR(std::exp(t.params.log_scales[3 * i]), dup_scale[d], 1e-6f);
   }
-  EXPECT_EQ(t.adam_m[0][0], 1.0f);          // survivors keep their moments
+  EXPECT_EQ(t.adam_m[0][0], 1.0f);                    // survivors keep their moments
   for (int32_t v : t.visible_count) EXPECT_EQ(v, 0);  // statistics restart
 }
 

@@ -12,8 +12,8 @@
 #include "desplat/train/distractors.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
-#include "desplat/train/view_residual.hpp"
 #include "desplat/train/trainer.hpp"
+#include "desplat/train/view_residual.hpp"
 #include "support/expect.hpp"
 #include "support/projection.hpp"
 #include "support/synthetic_views.hpp"
@@ -30,11 +30,11 @@ TEST(DistractorGrowth, CapIsUnexplainedPixelsPerDistractor) {
   s.pixels_per_distractor = 0;
   EXPECT_EQ(distractor_growth_budget(100, 0.1, 10000, s), kUnlimitedGrowth);  // off at 0 (paper)
   s.pixels_per_distractor = 16;
-  EXPECT_EQ(distractor_cap(0.1, 10000, s), 62);             // 1,000 px / 16
+  EXPECT_EQ(distractor_cap(0.1, 10000, s), 62);  // 1,000 px / 16
   EXPECT_EQ(distractor_growth_budget(50, 0.1, 10000, s), 12);
   EXPECT_EQ(distractor_growth_budget(80, 0.1, 10000, s), 0);  // over the cap: no growth (no forced shrink)
   EXPECT_EQ(distractor_growth_budget(0, 0.0, 10000, s), 0);
-  EXPECT_EQ(distractor_cap(2.0, 160, s), 10);                // fraction clamped to 1
+  EXPECT_EQ(distractor_cap(2.0, 160, s), 10);  // fraction clamped to 1
 }
 
 TEST(DistractorGrowth, StarvedBufferRule) {
@@ -126,9 +126,8 @@ TEST(DistractorGrowth, AlphaSumIsEachDistractorsAlphaIntegratedOverTheImage) {
   // covers them), z 2, s 0.1, o 0.8 → 0.8·2π·25.3 ≈ 127.17. C: behind the camera, 0.
   // D: z 1, s 10 (σ = 1,000 px), counted as at most the image's 4,096 px.
   const Camera camera = identity_camera(64, 100);
-  const GaussianSet g = round_distractors({{0.0f, 0.0f, 1.0f, 0.1f, 0.5f},
-                                           {0.0f, 0.0f, 2.0f, 0.1f, 0.8f},
-                                           {0.0f, 0.0f, -1.0f, 0.1f, 0.9f}});
+  const GaussianSet g = round_distractors(
+      {{0.0f, 0.0f, 1.0f, 0.1f, 0.5f}, {0.0f, 0.0f, 2.0f, 0.1f, 0.8f}, {0.0f, 0.0f, -1.0f, 0.1f, 0.9f}});
   const double a = 0.5 * 2 * M_PI * 100.3, b = 0.8 * 2 * M_PI * 25.3;
   EXPECT_NEAR(distractor_alpha_sum(g.view(), camera), a + b, 1e-3 * (a + b));
   const GaussianSet d = round_distractors({{0.0f, 0.0f, 1.0f, 10.0f, 0.5f}});
@@ -144,10 +143,10 @@ TEST(DistractorGrowth, AlphaSumBudgetFillsTheLimitAtTheBuffersMeanAlpha) {
   // 10 % of 10,000 px unexplained: limit 4.5 · 1,000 = 4,500. 100 distractors summing 4,000:
   // 40 each, room for ⌊500 / 40⌋ = 12 more.
   EXPECT_EQ(alpha_sum_budget(100, 4000.0, 0.1, 10000, s), 12);
-  EXPECT_EQ(alpha_sum_budget(100, 4500.0, 0.1, 10000, s), 0);   // at the limit
-  EXPECT_EQ(alpha_sum_budget(100, 9000.0, 0.1, 10000, s), 0);   // over it: no growth, no forced shrink
-  EXPECT_EQ(alpha_sum_budget(100, 10.0, 0.0, 10000, s), 0);     // nothing unexplained
-  EXPECT_EQ(alpha_sum_budget(10, 10.0, 3.0, 100, s), 440);      // fraction clamped to 1: (450 − 10) / 1
+  EXPECT_EQ(alpha_sum_budget(100, 4500.0, 0.1, 10000, s), 0);            // at the limit
+  EXPECT_EQ(alpha_sum_budget(100, 9000.0, 0.1, 10000, s), 0);            // over it: no growth, no forced shrink
+  EXPECT_EQ(alpha_sum_budget(100, 10.0, 0.0, 10000, s), 0);              // nothing unexplained
+  EXPECT_EQ(alpha_sum_budget(10, 10.0, 3.0, 100, s), 440);               // fraction clamped to 1: (450 − 10) / 1
   EXPECT_EQ(alpha_sum_budget(0, 0.0, 0.1, 10000, s), kUnlimitedGrowth);  // empty: the count cap decides
 }
 
@@ -229,8 +228,8 @@ TEST(ViewResidual, CountsAndPenalizesOnlyWhatTheStaticLayerExplains) {
   const auto& [sc, sa, dc, da, target, composite] = pixels;
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
-  const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3, ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask);
+  const ViewResidual r = measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3,
+                                               ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask);
   EXPECT_EQ(r.pixels, 3);
   EXPECT_EQ(r.static_unexplained, 2);
   // Pixel 0's composite is 0.75·0.5 = 0.375 (the distractor's black at α ¼): off by 0.145 → unexplained too.
@@ -327,8 +326,8 @@ TEST(ViewResidual, IgnoredPixelsAreInNoCountAndNeverUncovered) {
   std::vector<float> d_alpha = {1, 1, 1};
   std::vector<uint8_t> mask;
   const std::vector<float> keep = {1, 1, 0};
-  const ViewResidual r =
-      measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3, ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask, keep);
+  const ViewResidual r = measure_view_residual({sc, sa}, {dc, da}, composite, target, std::array<float, 3>{0, 0, 0}, 3,
+                                               ResidualPenalties{0.1f, 0.3f, 0.0f}, d_alpha, &mask, keep);
   EXPECT_EQ(r.pixels, 2);
   EXPECT_EQ(r.static_unexplained, 1);     // pixel 1 only
   EXPECT_EQ(r.composite_unexplained, 1);  // pixel 0 (see above)

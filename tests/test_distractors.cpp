@@ -74,8 +74,8 @@ TEST(Distractors, DefaultCountKeepsThePapersDensityOnTheImage) {
   EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 504, 378), s), 1000);
   EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 252, 189), s), 250);
   EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 1008, 756), s), 4000);
-  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), 16);   // 1000 · 3072 / 190512
-  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 4, 3), s), 1);      // never rounds to none
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 64, 48), s), 16);  // 1000 · 3072 / 190512
+  EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 4, 3), s), 1);     // never rounds to none
   EXPECT_EQ(init_distractors(look_at_camera(0.7f, 1.0f, 64, 48), s, 7).size(), 16u);
   s.initial_count = 0;
   EXPECT_EQ(distractor_count_for(look_at_camera(0.7f, 1.0f, 504, 378), s), 0);
@@ -136,8 +136,8 @@ TEST(Distractors, RefineCullsUnseenAndDensifiesOnlyBefore15000) {
   TrainableGaussians before = make();
   const RefineReport r = refine_distractors(before, d, DistractorSettings{}, 5000, 100, rng);
   EXPECT_EQ(r.split, 1);
-  EXPECT_EQ(r.culled, 2);              // unseen + transparent
-  EXPECT_EQ(before.size(), 1u + 2u);   // the kept one + 2 split samples
+  EXPECT_EQ(r.culled, 2);             // unseen + transparent
+  EXPECT_EQ(before.size(), 1u + 2u);  // the kept one + 2 split samples
   EXPECT_FALSE(r.opacity_reset);
   TrainableGaussians after = make();
   const RefineReport r2 = refine_distractors(after, d, DistractorSettings{}, 16000, 100, rng);
@@ -204,7 +204,8 @@ std::vector<std::vector<float>> all_distractor_params(const Trainer& t) {
   std::vector<std::vector<float>> out;
   for (const TrainableGaussians& d : t.distractors()) {
     std::vector<float> p;
-    for (int g = 0; g < kParamGroups; ++g) p.insert(p.end(), d.param(ParamGroup(g)).begin(), d.param(ParamGroup(g)).end());
+    for (int g = 0; g < kParamGroups; ++g)
+      p.insert(p.end(), d.param(ParamGroup(g)).begin(), d.param(ParamGroup(g)).end());
     out.push_back(p);
   }
   return out;
@@ -224,8 +225,10 @@ TEST(DistractorTraining, OnlyTheStepsViewTouchesItsDistractors) {
     EXPECT_EQ(st.view_distractors, 200u);
     EXPECT_GT(st.timings.distractor, 0.0);
     for (size_t v = 0; v < after.size(); ++v)
-      if (int(v) == view) EXPECT_NE(before[v], after[v]) << "step " << i;
-      else EXPECT_EQ(before[v], after[v]) << "step " << i << " view " << v;
+      if (int(v) == view)
+        EXPECT_NE(before[v], after[v]) << "step " << i;
+      else
+        EXPECT_EQ(before[v], after[v]) << "step " << i << " view " << v;
     EXPECT_EQ(t.distractors()[view].adam_step, (i / int(data.train.size())) + 1);
   }
 }
@@ -307,7 +310,8 @@ TEST(DistractorTraining, ResumeReproducesUninterruptedRunBitExactly) {
   Trainer straight(data, cfg);
   for (int i = 0; i < 380; ++i) straight.step();
 
-  const std::filesystem::path file = std::filesystem::temp_directory_path() / ("desplat_distractor_resume_" + std::to_string(::getpid()) + ".ckpt");
+  const std::filesystem::path file =
+      std::filesystem::temp_directory_path() / ("desplat_distractor_resume_" + std::to_string(::getpid()) + ".ckpt");
   {
     Trainer first(data, cfg);
     for (int i = 0; i < 155; ++i) first.step();  // after distractor refinements, mid-epoch

@@ -26,13 +26,14 @@ namespace desplat::test {
 namespace {
 
 TrainingData synth_capture(const std::string& name, const std::string& extra) {
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
-                                    ("desplat_effects_" + name + "_" + std::to_string(::getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("desplat_effects_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
-  testing::spit(dir / "scene.json", R"({"base": ")" + (std::filesystem::path(DESPLAT_SOURCE_DIR) /
-                                                        "data/synthetic/bench.json").string() +
-                                        R"(", "camera.width": 160, "camera.height": 120, "views.count": 24,
-                                            "distractors.clutter_ratio": 0)" + extra + "}");
+  testing::spit(dir / "scene.json",
+                R"({"base": ")" + (std::filesystem::path(DESPLAT_SOURCE_DIR) / "data/synthetic/bench.json").string() +
+                    R"(", "camera.width": 160, "camera.height": 120, "views.count": 24,
+                                            "distractors.clutter_ratio": 0)" +
+                    extra + "}");
   synth::GenerateOptions g;
   g.out = dir / "capture";
   synth::generate_scene(synth::load_description(dir / "scene.json"), g);
@@ -134,7 +135,8 @@ TEST(Effects, AutoTurnsTheBackgroundModelOnForASkyAndOnlyThen) {
   for (TrainView& v : painted.train)
     for (int y = 0; y < v.image.height / 2; ++y)
       for (int x = 0; x < v.image.width; ++x)
-        for (int c = 0; c < 3; ++c) v.image.pixels[3 * (size_t(y) * v.image.width + x) + c] = ((x / 6 + y / 6) % 2) ? 204 : 51;
+        for (int c = 0; c < 3; ++c)
+          v.image.pixels[3 * (size_t(y) * v.image.width + x) + c] = ((x / 6 + y / 6) % 2) ? 204 : 51;
   const EffectsEvidence textured = examine_effects(painted);
   EXPECT_FALSE(textured.background) << textured.background_reason;
   std::vector<std::string> why;
@@ -151,7 +153,8 @@ TEST(Effects, AutoTurnsTheBackgroundModelOnForASkyAndOnlyThen) {
 TEST(Effects, TheOpaqueTermIsOffForASteadySkyOnly) {
   const std::string low = R"(, "sky.enabled": true, "views.height": 1.0, "views.target": [0, 0, 0.5])";
   const TrainingData sky = synth_capture("steady_sky", low);
-  const TrainingData exposed = synth_capture("exposed_sky", low + R"(, "exposure": {"stops": 1, "white_balance": 0.1})");
+  const TrainingData exposed =
+      synth_capture("exposed_sky", low + R"(, "exposure": {"stops": 1, "white_balance": 0.1})");
   const TrainingData ground = synth_capture("steady_ground", "");
   TrainingData blind = sky;
   for (auto& views : blind.point_train_views) views.clear();

@@ -249,7 +249,6 @@ TEST(Forward, OpacityExtentCoversEveryPixelWhereAlphaReachesTheCutoff) {
   EXPECT_GT(narrower, 50);
 }
 
-
 // blend_weights against two independent answers: the closed form for one unoccluded Gaussian,
 // and the backward pass's colour gradient (∂ΣC_red/∂c_red,i = Σ_p αᵢTᵢ), which is itself
 // checked against Jet derivatives in test_backward.cpp.

@@ -38,7 +38,7 @@ CameraPath spiral_path(int count, const CameraPathSettings& s, std::mt19937& rng
 
 TEST(FreeSpace, DistanceToASegmentByHand) {
   const std::array<double, 3> a{0, 0, 0}, b{2, 0, 0};
-  EXPECT_DOUBLE_EQ(distance_to_segment({1, 1, 0}, a, b), 1.0);           // beside the middle
+  EXPECT_DOUBLE_EQ(distance_to_segment({1, 1, 0}, a, b), 1.0);             // beside the middle
   EXPECT_DOUBLE_EQ(distance_to_segment({3, 1, 0}, a, b), std::sqrt(2.0));  // past the end: to b
   EXPECT_DOUBLE_EQ(distance_to_segment({-3, 0, 4}, a, b), 5.0);            // before the start: to a
   EXPECT_DOUBLE_EQ(distance_to_segment({0, 3, 4}, a, a), 5.0);             // a point segment
@@ -97,7 +97,7 @@ TEST(FreeSpace, PathKeepsShortStepsBetweenConsecutiveCamerasOnly) {
   EXPECT_EQ(path.from[1][0], 30.0);
   // Centres: on the first segment, just inside and just outside its radius, on the skipped
   // step, past the first segment's end, on the second segment.
-  const std::vector<float> means{2, 0.49f, 0,  2, 0.51f, 0,  15, 0, 0,  4.3f, 0.3f, 0,  31, 0, -0.2f};
+  const std::vector<float> means{2, 0.49f, 0, 2, 0.51f, 0, 15, 0, 0, 4.3f, 0.3f, 0, 31, 0, -0.2f};
   const std::vector<uint8_t> on = on_camera_path(path, means);
   EXPECT_EQ(on, (std::vector<uint8_t>{1, 0, 0, 1, 1}));  // (4.3, 0.3): √(0.09 + 0.09) ≈ 0.42 from (4, 0, 0)
 
@@ -205,7 +205,7 @@ TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
     SCOPED_TRACE(by_extent ? "by extent" : "by centre");
     TrainConfig cfg = test::short_schedule(30);
     cfg.distractors.enabled = false;
-    cfg.densify.warmup = 10;        // refinements at steps 20 and 30 …
+    cfg.densify.warmup = 10;  // refinements at steps 20 and 30 …
     cfg.densify.refine_every = 10;
     cfg.densify.stop_split_at = 0;  // … that cull only: the count moves by culls alone
     cfg.densify.camera_path.by_extent = by_extent;
@@ -224,8 +224,7 @@ TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
     planted.resize(2);
     const Eigen::Vector3d needle_at = mid + 2 * path.radius * inward;
     // The needle's long axis (local x) turned onto `inward`.
-    const Eigen::Quaternionf turn =
-        Eigen::Quaternionf::FromTwoVectors(Eigen::Vector3f::UnitX(), inward.cast<float>());
+    const Eigen::Quaternionf turn = Eigen::Quaternionf::FromTwoVectors(Eigen::Vector3f::UnitX(), inward.cast<float>());
     for (int k = 0; k < 3; ++k) {
       planted.means[k] = float(mid[k]), planted.log_scales[k] = std::log(0.02f);
       planted.means[3 + k] = float(needle_at[k]), planted.log_scales[3 + k] = std::log(k == 0 ? 0.2f : 0.01f);
@@ -264,16 +263,16 @@ TEST(FreeSpace, TrainerCullsAFloaterOnThePathAtTheFirstRefinement) {
 // of the segment between them lies a triangle neither sees, reaching to depth 2.
 TEST(FreeSpace, BlindGapByHand) {
   const Camera a = camera_at(0, 0, 0), b = camera_at(2, 0, 0);  // 16 px, fx 16: tan(half fov) = 1/2
-  const double gap = 0.5;                                          // within 1 of the segment
-  EXPECT_TRUE(in_blind_gap({1, 0, 0.5}, a, b, gap));               // between them, 0.5 ahead
-  EXPECT_TRUE(in_blind_gap({1, 0.9, 0.3}, a, b, gap));             // above that: √0.9 ≈ 0.95 from it
-  EXPECT_FALSE(in_blind_gap({1, 0, 1.5}, a, b, gap));              // unseen, but 1.5 from the segment
-  EXPECT_FALSE(in_blind_gap({1, 0, -0.5}, a, b, gap));             // behind the pair
-  EXPECT_FALSE(in_blind_gap({0.2, 0, 0.8}, a, b, gap));            // a sees it (x/z = 1/4)
-  EXPECT_FALSE(in_blind_gap({1.7, 0, 0.8}, a, b, gap));            // b sees it ((x − 2)/z = −3/8)
-  EXPECT_FALSE(in_blind_gap({1, 0, 0.5}, a, b, 0.2));              // 0.5 from a segment of 2: beyond 0.2 × 2
-  EXPECT_TRUE(in_blind_gap({-0.5, 0, 0.3}, a, b, gap));            // past a's side, unseen: 0.58 from a
-  EXPECT_FALSE(in_blind_gap({-1.5, 0, 0.1}, a, b, gap));           // 1.5 from a
+  const double gap = 0.5;                                       // within 1 of the segment
+  EXPECT_TRUE(in_blind_gap({1, 0, 0.5}, a, b, gap));            // between them, 0.5 ahead
+  EXPECT_TRUE(in_blind_gap({1, 0.9, 0.3}, a, b, gap));          // above that: √0.9 ≈ 0.95 from it
+  EXPECT_FALSE(in_blind_gap({1, 0, 1.5}, a, b, gap));           // unseen, but 1.5 from the segment
+  EXPECT_FALSE(in_blind_gap({1, 0, -0.5}, a, b, gap));          // behind the pair
+  EXPECT_FALSE(in_blind_gap({0.2, 0, 0.8}, a, b, gap));         // a sees it (x/z = 1/4)
+  EXPECT_FALSE(in_blind_gap({1.7, 0, 0.8}, a, b, gap));         // b sees it ((x − 2)/z = −3/8)
+  EXPECT_FALSE(in_blind_gap({1, 0, 0.5}, a, b, 0.2));           // 0.5 from a segment of 2: beyond 0.2 × 2
+  EXPECT_TRUE(in_blind_gap({-0.5, 0, 0.3}, a, b, gap));         // past a's side, unseen: 0.58 from a
+  EXPECT_FALSE(in_blind_gap({-1.5, 0, 0.1}, a, b, gap));        // 1.5 from a
 }
 
 // With both rules on, each Gaussian's verdict against an independent brute force: the closest
@@ -328,10 +327,9 @@ TEST(FreeSpace, TubeAndBlindGapVerdictsMatchBruteForce) {
       const double reach = path.blind_gap * (b - a).norm();
       border |= std::abs(best - path.radius) < 1e-3 || std::abs(best - reach) < 1e-3;
       tube |= best < path.radius;
-      const Eigen::Vector3d ahead = Eigen::Vector3d(path.from_camera[k].R_cw[6], path.from_camera[k].R_cw[7],
-                                                    path.from_camera[k].R_cw[8]) +
-                                    Eigen::Vector3d(path.to_camera[k].R_cw[6], path.to_camera[k].R_cw[7],
-                                                    path.to_camera[k].R_cw[8]);
+      const Eigen::Vector3d ahead =
+          Eigen::Vector3d(path.from_camera[k].R_cw[6], path.from_camera[k].R_cw[7], path.from_camera[k].R_cw[8]) +
+          Eigen::Vector3d(path.to_camera[k].R_cw[6], path.to_camera[k].R_cw[7], path.to_camera[k].R_cw[8]);
       gap |= best < reach && (p - 0.5 * (a + b)).dot(ahead) > 0 && !seen_by(path.from_camera[k], p) &&
              !seen_by(path.to_camera[k], p);
     }
@@ -363,7 +361,7 @@ TEST(FreeSpace, TrainerCullsAFloaterInABlindGap) {
     const Camera &ca = data.train[0].camera, &cb = data.train[1].camera;
     const auto a = ca.center(), b = cb.center();
     const Eigen::Vector3d A(a[0], a[1], a[2]), B(b[0], b[1], b[2]), mid = 0.5 * (A + B);
-    const double step = (B - A).norm();                               // 0.39
+    const double step = (B - A).norm();                              // 0.39
     const Eigen::Vector3d at = mid - 0.4 * step * mid.normalized();  // 0.16 inward: cameras circle the origin
     const std::array<float, 3> x{float(at[0]), float(at[1]), float(at[2])};
     ASSERT_EQ(ca.pixel_of(x), -1);  // neither photo sees it …
@@ -394,8 +392,9 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
   const auto error = [](const nlohmann::json& j) {
     return testing::error_of<std::invalid_argument>([&] { config_from_json(j); });
   };
-  EXPECT_CONTAINS(error({{"densify", {{"camera_path_radius", -0.1}}}}),
-                  "config: densify.camera_path_radius must be a number in [0, 10^18] (0 turns the rule off) (got -0.1)");
+  EXPECT_CONTAINS(
+      error({{"densify", {{"camera_path_radius", -0.1}}}}),
+      "config: densify.camera_path_radius must be a number in [0, 10^18] (0 turns the rule off) (got -0.1)");
   EXPECT_CONTAINS(error({{"densify", {{"camera_path_max_segment", 0}}}}),
                   "config: densify.camera_path_max_segment must be a number in (0, 10^18] (got 0)");
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_radius", 0.05}}}}).densify.camera_path.radius, 0.05f);
@@ -403,8 +402,9 @@ TEST(FreeSpace, SettingsAreCheckedReadAndOffInThePaperPreset) {
   EXPECT_EQ(preset_config("paper").densify.camera_path.blind_gap, 0.0f);
   EXPECT_EQ(preset_config("default").densify.camera_path.blind_gap, 0.5f);
   EXPECT_EQ(config_from_json({{"densify", {{"camera_path_blind_gap", 0.25}}}}).densify.camera_path.blind_gap, 0.25f);
-  EXPECT_CONTAINS(error({{"densify", {{"camera_path_blind_gap", -1}}}}),
-                  "config: densify.camera_path_blind_gap must be a number in [0, 10^18] (0 turns the rule off) (got -1)");
+  EXPECT_CONTAINS(
+      error({{"densify", {{"camera_path_blind_gap", -1}}}}),
+      "config: densify.camera_path_blind_gap must be a number in [0, 10^18] (0 turns the rule off) (got -1)");
   EXPECT_EQ(preset_config("default").densify.camera_path.radius, 0.08f);
   EXPECT_FALSE(preset_config("default").densify.camera_path.by_extent);
   EXPECT_TRUE(config_from_json({{"densify", {{"camera_path_by_extent", true}}}}).densify.camera_path.by_extent);

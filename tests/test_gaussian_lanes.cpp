@@ -15,7 +15,7 @@ struct Reference {
   bool visible;
   double mean2d[2], cov2d[3], conic[3], radius[2];
   double cov_term_scale;  // |J|²·trace(V): the size of the terms cov2d sums, which may cancel
-  bool ambiguous;  // a float rounding away from a culling or ceil boundary: skip exact checks
+  bool ambiguous;         // a float rounding away from a culling or ceil boundary: skip exact checks
 };
 
 // preprocess's rules in double, from the templates.
@@ -41,7 +41,8 @@ Reference reference(const LaneCamera& c, const double* mean, const double* log_s
     if (std::abs(edge) < 1e-3 * std::max(1.0, std::abs(mx) + std::abs(my))) r.ambiguous = true;
   if (!(rx > 0 && ry > 0) || mx + rx <= 0 || mx - rx >= c.width || my + ry <= 0 || my - ry >= c.height) return r;
   r.visible = true;
-  const double rz = 1.0 / p[2], jx = K.fx * rz * (1.0 + std::abs(p[0] * rz)), jy = K.fy * rz * (1.0 + std::abs(p[1] * rz));
+  const double rz = 1.0 / p[2], jx = K.fx * rz * (1.0 + std::abs(p[0] * rz)),
+               jy = K.fy * rz * (1.0 + std::abs(p[1] * rz));
   r.cov_term_scale = std::max(jx * jx, jy * jy) * V.trace() + c.eps2d;
   r.mean2d[0] = mx, r.mean2d[1] = my;
   r.cov2d[0] = proj.cov2d(0, 0), r.cov2d[1] = proj.cov2d(0, 1), r.cov2d[2] = proj.cov2d(1, 1);
@@ -70,8 +71,8 @@ class Lanes : public ::testing::Test {
   const LaneCamera cam{R, t, K, 0.3f, 0.01f, 1e10f};
 
   // Runs one block through the lanes and compares every lane with the double reference.
-  void check_block(const float (&mean)[kLanes][3], const float (&log_scale)[kLanes][3],
-                   const float (&quat)[kLanes][4], int* compared) {
+  void check_block(const float (&mean)[kLanes][3], const float (&log_scale)[kLanes][3], const float (&quat)[kLanes][4],
+                   int* compared) {
     const LaneGaussians in = to_lanes(mean, log_scale, quat);
     LaneGeometry geometry;
     geometry_lanes(cam, in, geometry);
@@ -133,15 +134,15 @@ TEST_F(Lanes, HardCasesFollowTheScalarRules) {
     for (float& v : log_scale[l]) v = -3.0f;
     quat[l][0] = 1, quat[l][1] = quat[l][2] = quat[l][3] = 0.1f;
   }
-  for (float& v : quat[0]) v = 0.0f;                      // zero quaternion: identity
-  quat[1][2] = INFINITY;                                  // infinite component: identity
-  quat[2][3] = NAN;                                       // NaN component: culled (NaN rotation)
-  for (float& v : quat[3]) v = 1e-30f;                    // denormal-scale quaternion keeps its direction
-  mean[4][1] = NAN;                                       // NaN mean: culled
-  mean[5][2] = -10.0f;                                    // behind the camera
-  log_scale[6][0] = log_scale[6][1] = log_scale[6][2] = 20.0f;  // enormous: radius capped
-  log_scale[7][0] = NAN;                                  // NaN scale: culled
-  mean[8][0] = 1e6f;                                      // far off screen
+  for (float& v : quat[0]) v = 0.0f;                             // zero quaternion: identity
+  quat[1][2] = INFINITY;                                         // infinite component: identity
+  quat[2][3] = NAN;                                              // NaN component: culled (NaN rotation)
+  for (float& v : quat[3]) v = 1e-30f;                           // denormal-scale quaternion keeps its direction
+  mean[4][1] = NAN;                                              // NaN mean: culled
+  mean[5][2] = -10.0f;                                           // behind the camera
+  log_scale[6][0] = log_scale[6][1] = log_scale[6][2] = 20.0f;   // enormous: radius capped
+  log_scale[7][0] = NAN;                                         // NaN scale: culled
+  mean[8][0] = 1e6f;                                             // far off screen
   log_scale[9][0] = log_scale[9][1] = log_scale[9][2] = -80.0f;  // vanishing: the eps2d blur remains
   int compared = 0;
   check_block(mean, log_scale, quat, &compared);
@@ -167,7 +168,8 @@ TEST_F(Lanes, HardCasesFollowTheScalarRules) {
 TEST_F(Lanes, BackwardMatchesJetDerivatives) {
   using J = ceres::Jet<double, 10>;
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> xy(-2.0f, 2.0f), zr(1.0f, 6.0f), ls(-4.0f, 0.5f), qn(-1.0f, 1.0f), gr(-1.0f, 1.0f);
+  std::uniform_real_distribution<float> xy(-2.0f, 2.0f), zr(1.0f, 6.0f), ls(-4.0f, 0.5f), qn(-1.0f, 1.0f),
+      gr(-1.0f, 1.0f);
   Mat3<J> W;
   for (int i = 0; i < 9; ++i) W(i / 3, i % 3) = J(cam.W[i]);
   int checked = 0;
@@ -192,7 +194,8 @@ TEST_F(Lanes, BackwardMatchesJetDerivatives) {
     for (int l = 0; l < kLanes; ++l) {
       if (!proj.visible[l]) continue;
       J mean[3], log_scale[3], quat[4];
-      for (int k = 0; k < 3; ++k) mean[k] = J(g.mean[k][l], k), log_scale[k] = J(std::log(double(g.scale[k][l])), 3 + k);
+      for (int k = 0; k < 3; ++k)
+        mean[k] = J(g.mean[k][l], k), log_scale[k] = J(std::log(double(g.scale[k][l])), 3 + k);
       for (int k = 0; k < 4; ++k) quat[k] = J(g.quat[k][l], 6 + k);
       const Vec3<J> p = W * Vec3<J>(mean[0], mean[1], mean[2]) + Vec3<J>(J(cam.t[0]), J(cam.t[1]), J(cam.t[2]));
       // Skip Gaussians at project_ewa's clamp edge, where the derivative jumps.
@@ -210,7 +213,8 @@ TEST_F(Lanes, BackwardMatchesJetDerivatives) {
       float got[10];
       for (int k = 0; k < 3; ++k) got[k] = out.d_mean[k][l], got[3 + k] = out.d_log_scale[k][l];
       for (int k = 0; k < 4; ++k) got[6 + k] = out.d_quat[k][l];
-      for (int k = 0; k < 10; ++k) EXPECT_NEAR(got[k], L.v[k], 2e-4 * scale) << "block " << block << " lane " << l << " parameter " << k;
+      for (int k = 0; k < 10; ++k)
+        EXPECT_NEAR(got[k], L.v[k], 2e-4 * scale) << "block " << block << " lane " << l << " parameter " << k;
       ++checked;
     }
   }

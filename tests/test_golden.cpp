@@ -40,9 +40,7 @@ json& golden() {
   return j;
 }
 
-void save_golden() {
-  std::ofstream(kGoldenPath) << golden().dump(1) << "\n";
-}
+void save_golden() { std::ofstream(kGoldenPath) << golden().dump(1) << "\n"; }
 
 // 8×6 block means of an image, per channel.
 std::vector<double> thumbnail(const FloatImage& img) {
@@ -121,12 +119,14 @@ TEST(Golden, ShortTrainingRun) {
   Trainer trainer(data, c);
   for (int i = 0; i < 200; ++i) trainer.step();
   double psnr = 0, ssim = 0;
-  for (const auto& m : trainer.evaluate(data.test)) psnr += m.psnr / data.test.size(), ssim += m.ssim / data.test.size();
+  for (const auto& m : trainer.evaluate(data.test))
+    psnr += m.psnr / data.test.size(), ssim += m.ssim / data.test.size();
   check_value(training_key("train_200_test_psnr"), psnr, kPsnrTolerance);
   check_value(training_key("train_200_test_ssim"), ssim, kSsimTolerance);
-  check_value(training_key("train_200_gaussians"), double(trainer.gaussians().size()), 0.02 * trainer.gaussians().size());
-  check_thumbnail(training_key("train_200_render_test0"), thumbnail(trainer.render(data.test[0].camera, c.eval_background)),
-                  kThumbTrainTolerance);
+  check_value(training_key("train_200_gaussians"), double(trainer.gaussians().size()),
+              0.02 * trainer.gaussians().size());
+  check_thumbnail(training_key("train_200_render_test0"),
+                  thumbnail(trainer.render(data.test[0].camera, c.eval_background)), kThumbTrainTolerance);
   if (updating()) save_golden();
 }
 

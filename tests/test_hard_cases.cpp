@@ -32,9 +32,9 @@ GaussianSet single(float x, float y, float z, float log_scale, float logit = 1.0
 
 GaussianSet concat(const GaussianSet& a, const GaussianSet& b) {
   GaussianSet g = a;
-  for (auto [dst, src] : {std::pair{&g.means, &b.means}, std::pair{&g.log_scales, &b.log_scales},
-                          std::pair{&g.quats, &b.quats}, std::pair{&g.opacity_logits, &b.opacity_logits},
-                          std::pair{&g.colors, &b.colors}})
+  for (auto [dst, src] :
+       {std::pair{&g.means, &b.means}, std::pair{&g.log_scales, &b.log_scales}, std::pair{&g.quats, &b.quats},
+        std::pair{&g.opacity_logits, &b.opacity_logits}, std::pair{&g.colors, &b.colors}})
     dst->insert(dst->end(), src->begin(), src->end());
   return g;
 }
@@ -73,15 +73,16 @@ Result run_and_check(const GaussianSet& g, const Camera& cam, const std::string&
   for (auto* v : {&r.wC, &r.wA, &r.wD})
     for (float& x : *v) x = n(rng);
   rasterize_backward(g.view(), cam, s, r.out, r.wC, r.wA, r.wD, r.grads);
-  for (const auto* v : {&r.grads.means, &r.grads.log_scales, &r.grads.quats, &r.grads.opacity_logits,
-                        &r.grads.colors, &r.grads.means2d, &r.grads.absgrad})
+  for (const auto* v : {&r.grads.means, &r.grads.log_scales, &r.grads.quats, &r.grads.opacity_logits, &r.grads.colors,
+                        &r.grads.means2d, &r.grads.absgrad})
     EXPECT_TRUE(all_finite(*v)) << label;
   if (jet) {
     const std::vector<double> want = jet_gradient(g, cam, s, r.wC, r.wA, r.wD);
     const std::vector<float> got = flatten_grads(r.grads);
     double scale = 0;
     for (double w : want) scale = std::max(scale, std::abs(w));
-    for (size_t i = 0; i < want.size(); ++i) EXPECT_NEAR(got[i], want[i], 2e-4 * scale + 1e-5) << label << " param " << i;
+    for (size_t i = 0; i < want.size(); ++i)
+      EXPECT_NEAR(got[i], want[i], 2e-4 * scale + 1e-5) << label << " param " << i;
   }
   return r;
 }

@@ -4,11 +4,11 @@
 // real checkpoint of a small run and changes exactly what the case is about.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <cmath>
 #include <filesystem>
 #include <limits>
 #include <string>
-#include <unistd.h>
 
 #include "desplat/io/checkpoint.hpp"
 #include "desplat/train/training_checkpoint.hpp"
@@ -38,8 +38,8 @@ struct Saved {
 Saved saved_after_steps(const TrainingData& data, const TrainConfig& cfg, int steps, const std::string& tag) {
   Trainer t(data, cfg);
   for (int i = 0; i < steps; ++i) t.step();
-  const auto file = std::filesystem::temp_directory_path() /
-                    ("desplat_hostile_" + tag + "_" + std::to_string(::getpid()) + ".ckpt");
+  const auto file =
+      std::filesystem::temp_directory_path() / ("desplat_hostile_" + tag + "_" + std::to_string(::getpid()) + ".ckpt");
   write_checkpoint(file, make_training_checkpoint(t));
   return {file, read_checkpoint(file)};
 }
@@ -89,7 +89,9 @@ TEST_F(HostileCheckpoint, ViewOrderIndexOutOfRangeOrNegativeIsRefused) {
 }
 
 TEST_F(HostileCheckpoint, ViewOrderOfAnotherViewCountIsRefused) {
-  const std::string e = error_with([](Checkpoint& c) { c.put("trainer/view_order", {3}, std::vector<int32_t>{0, 1, 2}); });
+  const std::string e = error_with([](Checkpoint& c) {
+    c.put("trainer/view_order", {3}, std::vector<int32_t>{0, 1, 2});
+  });
   EXPECT_CONTAINS(e, "trainer/view_order");
   EXPECT_CONTAINS(e, "lists 3 views but this run has 4");
 }
@@ -178,7 +180,8 @@ TEST_F(HostileCheckpoint, OldCheckpointOfAnotherSplitStillCannotCrash) {
   other.train.resize(2);
   Trainer t(other, cfg_);
   ::testing::internal::CaptureStdout();
-  const std::string e = error_of<CheckpointError>([&] { restore_training_checkpoint(t, read_checkpoint(saved_.file)); });
+  const std::string e =
+      error_of<CheckpointError>([&] { restore_training_checkpoint(t, read_checkpoint(saved_.file)); });
   ::testing::internal::GetCapturedStdout();
   EXPECT_CONTAINS(e, "trainer/view_order");
 }

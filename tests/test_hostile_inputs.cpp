@@ -78,7 +78,9 @@ TEST(HostileOutput, OutputOnTheInputOrTheRootIsRefused) {
   const fs::path data = dir.path() / "scene";
   fs::create_directories(data / "images");
   fs::create_directories(data / "sparse" / "0");
-  auto err = [&](const fs::path& out) { return message_of([&] { check_output_folder("--out", out, {{"--data", data}}); }); };
+  auto err = [&](const fs::path& out) {
+    return message_of([&] { check_output_folder("--out", out, {{"--data", data}}); });
+  };
   EXPECT_CONTAINS(err(data), "are the same folder");
   EXPECT_CONTAINS(err(data / "images"), "lies inside --data");
   EXPECT_CONTAINS(err(data / "sparse" / "0" / "new"), "lies inside --data");
@@ -96,7 +98,9 @@ TEST(HostileOutput, OutputOnTheInputOrTheRootIsRefused) {
   // desplat_render may write inside the model folder, not over it.
   const fs::path model = dir.path() / "model";
   fs::create_directories(model);
-  EXPECT_EQ(message_of([&] { check_output_folder("--out", model / "renders", {{"--model", model, true}}); }),
+  EXPECT_EQ(message_of([&] {
+              check_output_folder("--out", model / "renders", {{"--model", model, true}});
+            }),
             "no exception");
   EXPECT_CONTAINS(message_of([&] { check_output_folder("--out", model, {{"--model", model, true}}); }), "same folder");
 }
@@ -136,9 +140,8 @@ TEST(HostileScene, TwoNamesOfOneFileAreRefused) {
 TEST(HostileScene, NamesThatAreNotUtf8AreRefused) {
   SceneCase c;
   Synthetic s = write_synthetic(c.data());
-  write_text_model(c.data() / "sparse/0", s.model, [](std::string& images) {
-    images.replace(images.find("img_1.png"), 9, "caf\xe9.png");
-  });
+  write_text_model(c.data() / "sparse/0", s.model,
+                   [](std::string& images) { images.replace(images.find("img_1.png"), 9, "caf\xe9.png"); });
   const std::string e = c.load_error();
   EXPECT_CONTAINS(e, "'caf\\xe9.png' is not UTF-8 text");
   EXPECT_EQ(e.find("json.exception"), std::string::npos) << e;
@@ -170,7 +173,8 @@ TEST(HostileScene, AHugeDistortionSaysTheLensIsWrongNotTheDownscale) {
 TEST(HostileScene, IdenticalPosesAreRefusedForLackOfBaseline) {
   SceneCase c;
   Synthetic s = write_synthetic(c.data());
-  for (auto& [id, im] : s.model.images) im.qvec_wxyz = s.model.images.at(1).qvec_wxyz, im.tvec = s.model.images.at(1).tvec;
+  for (auto& [id, im] : s.model.images)
+    im.qvec_wxyz = s.model.images.at(1).qvec_wxyz, im.tvec = s.model.images.at(1).tvec;
   colmap::write_model_binary(s.model, c.data() / "sparse/0");
   EXPECT_CONTAINS(c.load_error(), "cameras sit at one position, so there is no baseline");
 }

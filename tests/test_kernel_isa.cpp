@@ -44,8 +44,9 @@ TEST(KernelIsa, SupportMatchesTheCpuFlags) {
   EXPECT_TRUE(cpu_supports(KernelIsa::Portable));
   EXPECT_EQ(cpu_supports(KernelIsa::Avx2), avx2);
   EXPECT_EQ(cpu_supports(KernelIsa::Avx512), avx512);
-  EXPECT_EQ(resolve_kernel_isa(KernelIsa::Auto),
-            avx512 ? KernelIsa::Avx512 : avx2 ? KernelIsa::Avx2 : KernelIsa::Portable);
+  EXPECT_EQ(resolve_kernel_isa(KernelIsa::Auto), avx512 ? KernelIsa::Avx512
+                                                 : avx2 ? KernelIsa::Avx2
+                                                        : KernelIsa::Portable);
 }
 
 TEST(KernelIsa, NamesRoundTripAndUnknownOnesAreRefused) {

@@ -93,8 +93,8 @@ TEST(Loss, IdenticalImagesHaveSsimOneAndInfinitePsnr) {
 TEST(Loss, PsnrOfImagesThatAreNotRgbIsAnError) {
   const std::vector<float> a(10, 0.5f), b(10, 0.25f);
   EXPECT_THROW(psnr(a, b), std::invalid_argument);
-  EXPECT_NEAR(psnr(std::span<const float>(a).first(9), std::span<const float>(b).first(9)),
-              -10.0 * std::log10(0.0625), 1e-9);
+  EXPECT_NEAR(psnr(std::span<const float>(a).first(9), std::span<const float>(b).first(9)), -10.0 * std::log10(0.0625),
+              1e-9);
 }
 
 TEST(Loss, GradientMatchesFiniteDifferences) {
@@ -224,7 +224,6 @@ TEST(MaskedLoss, IgnoredPixelsHaveNoInfluenceAndAllKeptIsTheUnmaskedLoss) {
   std::vector<float> short_mask(10);
   EXPECT_THROW(photometric_loss(im.render, im.target, w, h, 0.2f, {}, short_mask), std::invalid_argument);
 }
-
 
 // The SSIM is computed in bands of rows, one per thread, and its backward reads across the
 // bands' edges; L1 and PSNR are summed per row or chunk. Every thread count, including more

@@ -60,8 +60,12 @@ TEST(MaskTotalVariation, MatchesFiniteDifferences) {
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {  // the check needs no adjacent pair within the step
       const size_t p = size_t(y) * W + x;
-      if (x + 1 < W) { ASSERT_GT(std::abs(alpha[p] - alpha[p + 1]), 2e-3f); }
-      if (y + 1 < H) { ASSERT_GT(std::abs(alpha[p] - alpha[p + W]), 2e-3f); }
+      if (x + 1 < W) {
+        ASSERT_GT(std::abs(alpha[p] - alpha[p + 1]), 2e-3f);
+      }
+      if (y + 1 < H) {
+        ASSERT_GT(std::abs(alpha[p] - alpha[p + W]), 2e-3f);
+      }
     }
   const float lambda = 0.7f, h = 1e-3f;
   std::vector<float> grad(alpha.size(), 0.0f), scratch(alpha.size(), 0.0f);
@@ -69,9 +73,9 @@ TEST(MaskTotalVariation, MatchesFiniteDifferences) {
   for (size_t p = 0; p < alpha.size(); ++p) {
     std::vector<float> up = alpha, down = alpha;
     up[p] += h, down[p] -= h;
-    const double fd = (mask_total_variation(up, W, H, lambda, scratch) -
-                       mask_total_variation(down, W, H, lambda, scratch)) /
-                      (double(up[p]) - double(down[p]));
+    const double fd =
+        (mask_total_variation(up, W, H, lambda, scratch) - mask_total_variation(down, W, H, lambda, scratch)) /
+        (double(up[p]) - double(down[p]));
     EXPECT_NEAR(grad[p], fd, 1e-5) << "pixel " << p;
   }
 }
@@ -172,8 +176,9 @@ TEST(OccluderColourPrior, MatchesFiniteDifferences) {
 
 TEST(OccluderColourPrior, WrongSizesAreOneClearError) {
   std::vector<float> color(6), alpha(2), photo(5), dc(6), da(2);
-  const auto message =
-      testing::error_of<std::invalid_argument>([&] { occluder_colour_prior({color, alpha}, photo, 1.0f, dc, da); });
+  const auto message = testing::error_of<std::invalid_argument>([&] {
+    occluder_colour_prior({color, alpha}, photo, 1.0f, dc, da);
+  });
   EXPECT_CONTAINS(message, "occluder_colour_prior");
 }
 

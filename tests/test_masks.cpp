@@ -24,10 +24,10 @@
 
 namespace fs = std::filesystem;
 using namespace desplat;
+using colmap::CameraModelId;
 using desplat::testing::error_of;
 using desplat::testing::slurp;
 using desplat::testing::TempDir;
-using colmap::CameraModelId;
 
 namespace {
 
@@ -180,7 +180,8 @@ TEST(LoadViewMask, MatchesThePhotoPixelForPixel) {
       // The lens really resamples: the undistorted size is not the photo's size.
       EXPECT_NE(mask.width * downscale, kW) << "downscale " << downscale;
       float worst = 0;
-      for (size_t p = 0; p < mask.pixels.size(); ++p) worst = std::max(worst, std::abs(mask.pixels[p] - photo.pixels[3 * p]));
+      for (size_t p = 0; p < mask.pixels.size(); ++p)
+        worst = std::max(worst, std::abs(mask.pixels[p] - photo.pixels[3 * p]));
       EXPECT_LE(worst, 0.5f / 255 + 1e-5f) << "view " << view << " downscale " << downscale;
     }
   }
@@ -318,8 +319,10 @@ TEST(UserMasks, AMaskOfTheWrongSizeOrUnreadableNamesTheFile) {
   std::ofstream(c.dir.path() / "masks/view_1.png.png") << "not a png";
   const Scene scene = load_colmap_scene(c.dir.path(), all_train(c.cache.path(), 1));
   const std::string wrong_size = error_of<SceneError>([&] { load_view_keep_mask(scene, 0); });
-  EXPECT_CONTAINS(wrong_size, (scene.data_dir / "masks/view_0.png").string() + ": mask is 10x12 px but the photo 'view_0.png' is 64x48 px");
-  EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_keep_mask(scene, 1); }), "masks/view_1.png.png: cannot read the mask");
+  EXPECT_CONTAINS(wrong_size, (scene.data_dir / "masks/view_0.png").string() +
+                                  ": mask is 10x12 px but the photo 'view_0.png' is 64x48 px");
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_keep_mask(scene, 1); }),
+                  "masks/view_1.png.png: cannot read the mask");
   EXPECT_CONTAINS(error_of<SceneError>([&] { load_view_keep_mask(scene, 2); }), "has no mask of pixels to ignore");
   // Training reports one of them (views load in parallel) before its first step.
   EXPECT_CONTAINS(error_of<SceneError>([&] { load_training_data(scene); }), (scene.data_dir / "masks/view_").string());

@@ -98,8 +98,10 @@ std::vector<Case> every_rule() {
     for (int i = 0; i < 3; ++i) names.push_back("1clean00" + std::to_string(i));
     Case c{"robustnerf", names, "--split robustnerf", {}, {}};
     for (const std::string& n : names)
-      if (n.find("clutter") != std::string::npos) c.train.insert(n);
-      else if (n.find("extra") != std::string::npos) c.test.insert(n);
+      if (n.find("clutter") != std::string::npos)
+        c.train.insert(n);
+      else if (n.find("extra") != std::string::npos)
+        c.test.insert(n);
     cases.push_back(c);
   }
   {  // On-the-go: "extra" in the name tests, everything else trains
@@ -132,9 +134,10 @@ TEST_P(ModelFolderRoundTrip, RenderReopensTheTrainedViews) {
   write_named_scene(root / "scene", c.names);
   const std::string split_args = c.split_args + c.prepare(root.path());
   const fs::path model = root / "model", renders = root / "renders";
-  const Outcome trained = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root / "scene").string() + " --out " +
-                                  model.string() + " --iterations 5 --threads 2 --downscale 1 --effects distractors " + split_args,
-                              root / "train.log");
+  const Outcome trained =
+      run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root / "scene").string() + " --out " + model.string() +
+              " --iterations 5 --threads 2 --downscale 1 --effects distractors " + split_args,
+          root / "train.log");
   ASSERT_EQ(trained.exit_code, 0) << trained.output;
   // The recipe is what the model reopens from: list and .tsv files may move afterwards.
   fs::remove(root / "train.txt"), fs::remove(root / "test.txt"), fs::remove(root / "scene.tsv");

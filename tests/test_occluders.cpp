@@ -24,9 +24,9 @@
 namespace fs = std::filesystem;
 using namespace desplat;
 using desplat::testing::error_of;
+using desplat::testing::fox_dir;
 using desplat::testing::slurp;
 using desplat::testing::TempDir;
-using desplat::testing::fox_dir;
 
 namespace {
 
@@ -121,7 +121,8 @@ TEST_F(OccludeFox, EveryTrainingViewHasAMaskCoveringTheReportedArea) {
         if (value == 0.0f) continue;
         ++covered;
         bool in_a_box = false;
-        for (const Occluder& o : v.occluders) in_a_box |= x >= o.box[0] && x < o.box[2] && y >= o.box[1] && y < o.box[3];
+        for (const Occluder& o : v.occluders)
+          in_a_box |= x >= o.box[0] && x < o.box[2] && y >= o.box[1] && y < o.box[3];
         outside_boxes += !in_a_box;
       }
     EXPECT_EQ(outside_boxes, 0u) << v.name;
@@ -152,7 +153,9 @@ TEST_F(OccludeFox, PixelsChangeInsideTheMaskAndOnlyByJpegNoiseOutside) {
     ASSERT_EQ(before.height, after.height);
     ASSERT_EQ(after.channels, 3);
     std::vector<uint8_t> block_touched(size_t((m.width + 7) / 8) * ((m.height + 7) / 8), 0);
-    const auto block = [&](int x, int y) -> uint8_t& { return block_touched[size_t(y / 8) * ((m.width + 7) / 8) + x / 8]; };
+    const auto block = [&](int x, int y) -> uint8_t& {
+      return block_touched[size_t(y / 8) * ((m.width + 7) / 8) + x / 8];
+    };
     for (int y = 0; y < m.height; ++y)
       for (int x = 0; x < m.width; ++x)
         if (m.at(x, y, 0) > 0.5f) block(x, y) = 1;
@@ -215,14 +218,15 @@ TEST_F(OccludeFox, TopmostOccluderShowsTheReportedContent) {
     size_t n = 0;
     for (int by = 0; by + 8 <= after.height; by += 8)
       for (int bx = 0; bx + 8 <= after.width; bx += 8) {
-        if (!deep_inside(bx, by) || !deep_inside(bx + 8, by) || !deep_inside(bx, by + 8) || !deep_inside(bx + 8, by + 8))
+        if (!deep_inside(bx, by) || !deep_inside(bx + 8, by) || !deep_inside(bx, by + 8) ||
+            !deep_inside(bx + 8, by + 8))
           continue;
         for (int y = by; y < by + 8; ++y)
           for (int x = bx; x < bx + 8; ++x)
             for (int ch = 0; ch < 3; ++ch) {
-              const float expected = o.source_image.empty()
-                                         ? o.color[ch] / 255.0f
-                                         : source.at(x + o.source_box[0] - o.box[0], y + o.source_box[1] - o.box[1], ch);
+              const float expected = o.source_image.empty() ? o.color[ch] / 255.0f
+                                                            : source.at(x + o.source_box[0] - o.box[0],
+                                                                        y + o.source_box[1] - o.box[1], ch);
               sum += std::abs(after.at(x, y, ch) - expected);
               ++n;
             }
@@ -278,8 +282,10 @@ TEST_F(OccludeFox, OutputLoadsAndMasksLineUpWithTheChangedPixels) {
   for (size_t p = 0; p < m.pixels.size(); ++p) {
     float diff = 0;
     for (int c = 0; c < 3; ++c) diff = std::max(diff, std::abs(a.pixels[3 * p + c] - b.pixels[3 * p + c]));
-    if (m.pixels[p] > 0.5f) n_in += 1, changed_in += diff > 24.0f / 255;
-    else if (m.pixels[p] == 0.0f) n_out += 1, changed_out += diff > 24.0f / 255;
+    if (m.pixels[p] > 0.5f)
+      n_in += 1, changed_in += diff > 24.0f / 255;
+    else if (m.pixels[p] == 0.0f)
+      n_out += 1, changed_out += diff > 24.0f / 255;
   }
   ASSERT_GT(n_in, 0);
   EXPECT_GT(changed_in / n_in, 0.5);
@@ -349,7 +355,8 @@ TEST(OccludeScene, TracksShareOccludersOverConsecutiveTrainingViews) {
   const OccludeReport r1 = occlude_scene(one), r0 = occlude_scene(def);
   for (size_t i = 0; i < r0.views.size(); ++i) {
     EXPECT_EQ(r1.views[i].occluded, r0.views[i].occluded);
-    EXPECT_EQ(slurp(dir.path() / "one/images" / r1.views[i].name), slurp(dir.path() / "default/images" / r0.views[i].name));
+    EXPECT_EQ(slurp(dir.path() / "one/images" / r1.views[i].name),
+              slurp(dir.path() / "default/images" / r0.views[i].name));
   }
 }
 

@@ -56,9 +56,7 @@ float le_float_at(const std::string& bytes, std::size_t offset) {
   return std::bit_cast<float>(u);
 }
 
-void write_bytes(const fs::path& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary) << bytes;
-}
+void write_bytes(const fs::path& path, const std::string& bytes) { std::ofstream(path, std::ios::binary) << bytes; }
 
 std::string read_bytes(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -99,8 +97,7 @@ void plant_awkward_values(GaussianSet& g) {
 std::vector<std::string> standard_props(int rest) {
   std::vector<std::string> p = {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"};
   for (int j = 0; j < rest; ++j) p.push_back("f_rest_" + std::to_string(j));
-  for (const char* s : {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
-    p.push_back(s);
+  for (const char* s : {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"}) p.push_back(s);
   return p;
 }
 
@@ -118,8 +115,7 @@ struct FakePly {
     std::string h = "ply" + newline + "format " + format + newline;
     for (const auto& l : before) h += l + newline;
     h += "element vertex " + vertex_count + newline;
-    for (const auto& p : props)
-      h += "property " + (p.find(' ') == std::string::npos ? "float " + p : p) + newline;
+    for (const auto& p : props) h += "property " + (p.find(' ') == std::string::npos ? "float " + p : p) + newline;
     for (const auto& l : after) h += l + newline;
     return h + "end_header" + newline;
   }
@@ -266,10 +262,10 @@ TEST_F(Ply, ByteLayoutIsTheStandardOrderWithChannelMajorRest) {
 
   // f_rest: R of coefficients 1..3, then G, then B; normals zero.
   const std::vector<std::vector<float>> want = {
-      {1.5f, -2.25f, 3, 0, 0, 0, 100, 101, 102, 110, 120, 130, 111, 121, 131, 112, 122, 132,
-       0.75f, -1.5f, -2.5f, -3.5f, 0.5f, 0.25f, 0.125f, 0.0625f},
-      {10.5f, 20.25f, -30, 0, 0, 0, 200, 201, 202, 210, 220, 230, 211, 221, 231, 212, 222, 232,
-       -0.75f, -4.5f, -5.5f, -6.5f, 1, 2, 3, 4}};
+      {1.5f, -2.25f, 3,   0,   0,   0,     100,   101,   102,   110,  120,   130,    111,
+       121,  131,    112, 122, 132, 0.75f, -1.5f, -2.5f, -3.5f, 0.5f, 0.25f, 0.125f, 0.0625f},
+      {10.5f, 20.25f, -30, 0,   0,   0,      200,   201,   202,   210, 220, 230, 211,
+       221,   231,    212, 222, 232, -0.75f, -4.5f, -5.5f, -6.5f, 1,   2,   3,   4}};
   for (std::size_t i = 0; i < 2; ++i)
     for (std::size_t p = 0; p < 26; ++p)
       EXPECT_EQ(le_float_at(bytes, header.size() + i * kRecord + 4 * p), want[i][p])
@@ -293,7 +289,7 @@ TEST_F(Ply, Degree3HasFortyFiveRestValuesPerRecord) {
   ASSERT_EQ(bytes.size() - body, 62u * 4);
 
   auto rest = [&](int j) { return le_float_at(bytes, body + 4 * (9 + j)); };
-  EXPECT_EQ(rest(0), 10.0f);   // R, coefficient 1
+  EXPECT_EQ(rest(0), 10.0f);    // R, coefficient 1
   EXPECT_EQ(rest(14), 150.0f);  // R, coefficient 15
   EXPECT_EQ(rest(15), 11.0f);   // G, coefficient 1
   EXPECT_EQ(rest(30), 12.0f);   // B, coefficient 1
@@ -306,11 +302,11 @@ TEST_F(Ply, Degree3HasFortyFiveRestValuesPerRecord) {
 TEST_F(Ply, ReadsOtherPropertyOrderWithNormalsAndNoRest) {
   FakePly f;
   f.before = {"comment exported by SomeViewer 2.1"};
-  f.props = {"opacity", "rot_3", "rot_2", "rot_1", "rot_0", "scale_2", "scale_1", "scale_0",
-             "f_dc_1", "f_dc_2", "f_dc_0", "nx", "ny", "nz", "z", "y", "x"};
-  const std::vector<float> values = {
-      -1, 0.4f, 0.3f, 0.2f, 0.1f, -3, -2, -1, 0.5f, 0.6f, 0.4f, 9, 9, 9, 3, 2, 1,
-      2, 4, 3, 2, 1, -6, -5, -4, 1.5f, 1.6f, 1.4f, NAN, NAN, NAN, 6, 5, 4};  // normals ignored
+  f.props = {"opacity", "rot_3",  "rot_2", "rot_1", "rot_0", "scale_2", "scale_1", "scale_0", "f_dc_1",
+             "f_dc_2",  "f_dc_0", "nx",    "ny",    "nz",    "z",       "y",       "x"};
+  const std::vector<float> values = {-1, 0.4f, 0.3f, 0.2f, 0.1f, -3,  -2,  -1, 0.5f, 0.6f, 0.4f, 9,
+                                     9,  9,    3,    2,    1,    2,   4,   3,  2,    1,    -6,   -5,
+                                     -4, 1.5f, 1.6f, 1.4f, NAN,  NAN, NAN, 6,  5,    4};  // normals ignored
   write_bytes(file("foreign.ply"), f.header() + le_bytes(values));
 
   const GaussianSet r = read_gaussian_ply(file("foreign.ply"));
@@ -332,8 +328,8 @@ TEST_F(Ply, ReadsScrambledRestCrLfFloat32AndAnEmptyExtraElement) {
     f.props.push_back(p);
   f.after = {"obj_info generator x", "element face 0", "property list uchar int vertex_indices"};
   // f_rest_j holds the value j.
-  const std::vector<float> values = {1, 2, 3, 0.1f, 0.2f, 0.3f, 8, 7, 6, 5, 4, 3, 2, 1, 0,
-                                     -1, -2, -3, -4, 0.6f, 0.8f, 0, 0};
+  const std::vector<float> values = {1, 2, 3, 0.1f, 0.2f, 0.3f, 8,  7,    6,    5, 4, 3,
+                                     2, 1, 0, -1,   -2,   -3,   -4, 0.6f, 0.8f, 0, 0};
   write_bytes(file("crlf.ply"), f.header() + le_bytes(values));
 
   const GaussianSet r = read_gaussian_ply(file("crlf.ply"));
@@ -380,8 +376,7 @@ TEST_F(Ply, BigEndianFormat) {
   FakePly f;
   f.format = "binary_big_endian 1.0";
   write_bytes(file("b.ply"), f.bytes());
-  EXPECT_THAT(read_error(file("b.ply")),
-              AllOf(HasSubstr("big-endian"), HasSubstr("only binary_little_endian 1.0")));
+  EXPECT_THAT(read_error(file("b.ply")), AllOf(HasSubstr("big-endian"), HasSubstr("only binary_little_endian 1.0")));
 }
 
 TEST_F(Ply, UnsupportedVersion) {
@@ -392,8 +387,9 @@ TEST_F(Ply, UnsupportedVersion) {
 }
 
 TEST_F(Ply, NoVertexElement) {
-  write_bytes(file("nv.ply"), "ply\nformat binary_little_endian 1.0\nelement face 0\n"
-                              "property list uchar int vertex_indices\nend_header\n");
+  write_bytes(file("nv.ply"),
+              "ply\nformat binary_little_endian 1.0\nelement face 0\n"
+              "property list uchar int vertex_indices\nend_header\n");
   EXPECT_THAT(read_error(file("nv.ply")), HasSubstr("no vertex element"));
 }
 
@@ -450,8 +446,8 @@ TEST_F(Ply, ElementWithDataBeforeVertex) {
   FakePly f;
   f.before = {"element camera 1", "property float fx"};
   write_bytes(file("c.ply"), f.header() + le_bytes({500}) + f.body(2));
-  EXPECT_THAT(read_error(file("c.ply")), AllOf(HasSubstr("element 'camera' has 1 entries"),
-                                               HasSubstr("only a vertex element is supported")));
+  EXPECT_THAT(read_error(file("c.ply")),
+              AllOf(HasSubstr("element 'camera' has 1 entries"), HasSubstr("only a vertex element is supported")));
 }
 
 TEST_F(Ply, ElementWithDataAfterVertex) {

@@ -11,8 +11,8 @@
 #include "desplat/train/distractors.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
-#include "desplat/train/view_residual.hpp"
 #include "desplat/train/trainer.hpp"
+#include "desplat/train/view_residual.hpp"
 #include "support/expect.hpp"
 #include "support/projection.hpp"
 #include "support/synthetic_views.hpp"
@@ -44,8 +44,8 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_EQ(paper.distractors.min_blend_weight, 0.0f);  // no idle cull
   EXPECT_EQ(paper.distractors.max_alpha_sum, 0.0f);     // no opacity limit on copies
   EXPECT_EQ(paper.transient_points.action, TransientPointAction::keep);
-  EXPECT_EQ(paper.appearance.hidden_width, 128);  // the paper's appendix
-  EXPECT_EQ(paper.appearance.lr_image, 1e-3f);     // the appendix's rate
+  EXPECT_EQ(paper.appearance.hidden_width, 128);    // the paper's appendix
+  EXPECT_EQ(paper.appearance.lr_image, 1e-3f);      // the appendix's rate
   EXPECT_EQ(paper.background.lambda_opaque, 0.0f);  // the authors' L_bg alone
   EXPECT_EQ(paper.background.lambda_alpha, 0.15f);
   EXPECT_EQ(paper.background.hidden_width, 128);
@@ -59,7 +59,7 @@ TEST(Presets, PaperIsTheAuthorsBehaviourAndDefaultIsTrainConfig) {
   EXPECT_FALSE(def.distractors.count_connected_misses);
   EXPECT_FALSE(def.densify.stats.hide_behind_distractors);
   EXPECT_TRUE(def.densify.stats.gradient_per_seen_pixel);
-  EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);  // one rate: training and the test fit
+  EXPECT_EQ(def.appearance.lr_image, def.appearance.test_lr);   // one rate: training and the test fit
   EXPECT_EQ(def.background.lr_image, def.appearance.lr_image);  // an own copy trains as the shared one
   EXPECT_EQ(def.distractors.lambda_explained, 0.05f);
   EXPECT_EQ(def.distractors.lambda_mask_tv, 0.1f);

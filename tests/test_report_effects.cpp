@@ -47,9 +47,9 @@ class ReportEffects : public ::testing::Test {
   // frames, no distractors and one exposure for every photo.
   static void SetUpTestSuite() {
     dir_ = new testing::TempDir("report_effects");
-    testing::spit(*dir_ / "scene.json",
-                  R"({"base": ")" + (fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/bench.json").string() +
-                      R"(", "camera.width": 160, "camera.height": 120, "views.count": 24,
+    testing::spit(*dir_ / "scene.json", R"({"base": ")" +
+                                            (fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/bench.json").string() +
+                                            R"(", "camera.width": 160, "camera.height": 120, "views.count": 24,
                          "distractors.clutter_ratio": 0, "sky.enabled": true, "views.height": 1.0,
                          "views.target": [0, 0, 0.5]})");
     synth::GenerateOptions g;
@@ -84,9 +84,12 @@ TEST_F(ReportEffects, EffectsAutoChoseAreTheOnesTheRowStates) {
   if (distractors) expected += " + per-view distractors (DeSplat)";
   if (appearance) expected += " + per-image appearance (exposure and colour)";
   expected += " + learned background (a colour per ray direction)";
-  if (!distractors && !appearance) expected += "; distractors and appearance are not modelled";
-  else if (!distractors) expected += "; distractors are not modelled";
-  else if (!appearance) expected += "; appearance is not modelled";
+  if (!distractors && !appearance)
+    expected += "; distractors and appearance are not modelled";
+  else if (!distractors)
+    expected += "; distractors are not modelled";
+  else if (!appearance)
+    expected += "; appearance is not modelled";
   EXPECT_EQ(effects_row(out / "report.html"), expected + " (chosen by --effects auto)") << "chosen: " << chosen;
 }
 

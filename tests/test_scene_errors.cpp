@@ -23,8 +23,9 @@ TEST(SceneErrors, MissingFolders) {
   e = error_of<SceneError>([&] { load_colmap_scene(dir.path(), quiet_options(cache.path(), w)); });
   EXPECT_CONTAINS(e, (fs::absolute(dir.path()) / "sparse/0").string());
   EXPECT_CONTAINS(e, "missing sparse/0/ folder");
-  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(dir.path() / "nowhere", quiet_options(cache.path(), w)); }),
-                  "nowhere: missing scene folder");
+  EXPECT_CONTAINS(
+      error_of<SceneError>([&] { load_colmap_scene(dir.path() / "nowhere", quiet_options(cache.path(), w)); }),
+      "nowhere: missing scene folder");
 }
 
 TEST(SceneErrors, RegisteredImageWithoutAFile) {
@@ -133,12 +134,14 @@ TEST(SceneErrors, BadOptionsAndSplits) {
                   "downscale must be at least 1");
   SceneOptions o = quiet_options(cache.path(), w);
   o.split.rule = SplitRule::RobustNeRF;  // img_*.png has none of the RobustNeRF keywords
-  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(dir.path(), o); }), "'img_0.png' must contain exactly one of");
+  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(dir.path(), o); }),
+                  "'img_0.png' must contain exactly one of");
   o.split.rule = SplitRule::OnTheGo;
   o.split.every_nth = 4;  // belongs to another rule
   EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(dir.path(), o); }), "does not use every_nth");
-  EXPECT_CONTAINS(error_of<SceneError>([&] { load_colmap_scene(dir.path(), quiet_options(dir.path() / "images/.cache", w)); }),
-                  "the image cache must be outside the input folder");
+  EXPECT_CONTAINS(
+      error_of<SceneError>([&] { load_colmap_scene(dir.path(), quiet_options(dir.path() / "images/.cache", w)); }),
+      "the image cache must be outside the input folder");
   EXPECT_CONTAINS(error_of<SceneError>([&] {
                     const Scene s = load_colmap_scene(dir.path(), quiet_options(cache.path(), w));
                     load_view_image(s, 99);

@@ -47,8 +47,8 @@ TEST(FoxScene, EveryObservationReprojectsOntoItsUndistortedKeypoint) {
       const double err = std::hypot(px[0] - keypoint[0], px[1] - keypoint[1]);
       // COLMAP's model: original frame, distorted lens, double precision.
       const auto& X = model.points.at(uint64_t(obs.point3d_id)).xyz;
-      const Eigen::Vector3d p = R * Eigen::Vector3d(X[0], X[1], X[2]) +
-                                Eigen::Vector3d(image.tvec[0], image.tvec[1], image.tvec[2]);
+      const Eigen::Vector3d p =
+          R * Eigen::Vector3d(X[0], X[1], X[2]) + Eigen::Vector3d(image.tvec[0], image.tvec[1], image.tvec[2]);
       const Vec2 model_px = image_from_camera(lens, {p.x() / p.z(), p.y() / p.z()});
       const double colmap_err = std::hypot(model_px[0] - obs.x, model_px[1] - obs.y);
       colmap_sum[uint64_t(obs.point3d_id)] += colmap_err;
@@ -132,7 +132,8 @@ TEST(FoxScene, NormalizationCentersAndScalesTheCameras) {
   const PinholeIntrinsics K = pinhole_intrinsics(v.undistorted_camera);
   for (size_t i = 0; i < scene.points_xyz.size(); i += 97) {
     const auto& X = model.points.at(scene.point_ids[i]).xyz;
-    const Eigen::Vector3d p = R * Eigen::Vector3d(X[0], X[1], X[2]) + Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2]);
+    const Eigen::Vector3d p =
+        R * Eigen::Vector3d(X[0], X[1], X[2]) + Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2]);
     if (p.z() <= 0) continue;
     const auto& xn = scene.points_xyz[i];
     const auto px = project(v.camera, {xn[0], xn[1], xn[2]});
@@ -166,7 +167,7 @@ TEST(FoxScene, FullResolutionImageIsTheUndistortedPhoto) {
   const FloatImage expected =
       undistort_image(read_image_rgb(kFox / "images" / v.name), v.distorted_camera, v.undistorted_camera);
   EXPECT_LE(max_abs_diff(img, quantized(expected)), 1.01 / 255);  // 8-bit cache: ±1 level at rounding ties
-  EXPECT_EQ(snapshot(kFox), before);  // nothing written into the input
+  EXPECT_EQ(snapshot(kFox), before);                              // nothing written into the input
   EXPECT_EQ(view_cache_path(scene, 3).parent_path().parent_path(), fs::absolute(cache.path()));
 }
 
@@ -191,9 +192,8 @@ TEST(FoxScene, DownscaleResizesThenUndistortsIntoTheCacheNotTheInput) {
   EXPECT_EQ(v.image_path, kFox / "images" / v.name);  // no images_2/ here
 
   const FloatImage img = load_view_image(scene, 5);
-  const FloatImage expected =
-      undistort_image(resize_area(read_image_rgb(kFox / "images" / v.name), 270, 480), v.distorted_camera,
-                      v.undistorted_camera);
+  const FloatImage expected = undistort_image(resize_area(read_image_rgb(kFox / "images" / v.name), 270, 480),
+                                              v.distorted_camera, v.undistorted_camera);
   EXPECT_LE(max_abs_diff(img, quantized(expected)), 1.01 / 255);
   const fs::path cached = view_cache_path(scene, 5);
   EXPECT_TRUE(fs::exists(cached));
@@ -220,7 +220,8 @@ TEST(SceneDownscale, UsesImagesNWhenItsSizesMatch) {
     EXPECT_DOUBLE_EQ(v.undistorted_camera.params[0], 40.0 * w2 / w);  // intrinsics follow the actual size
     EXPECT_DOUBLE_EQ(v.undistorted_camera.params[2], w / 2.0 * w2 / w);
     EXPECT_TRUE(view_cache_path(scene, 1).empty());  // pinhole at its own size: read directly
-    EXPECT_LE(max_abs_diff(load_view_image(scene, 1), quantized(constant_image(w2, h2, 0.8f))), 1e-6);  // the file as is
+    EXPECT_LE(max_abs_diff(load_view_image(scene, 1), quantized(constant_image(w2, h2, 0.8f))),
+              1e-6);  // the file as is
     EXPECT_FALSE(fs::exists(cache.path() / "views"));
   }
 }
@@ -288,6 +289,7 @@ TEST(SceneCache, WorksWithAReadOnlyInput) {
   const auto before = snapshot(dir.path());
   Warnings warn;
   const Scene scene = load_colmap_scene(dir.path(), quiet_options(cache.path(), warn, 2));
-  for (size_t i = 0; i < scene.views.size(); ++i) EXPECT_EQ(load_view_image(scene, i).width, scene.views[i].camera.width);
+  for (size_t i = 0; i < scene.views.size(); ++i)
+    EXPECT_EQ(load_view_image(scene, i).width, scene.views[i].camera.width);
   EXPECT_EQ(snapshot(dir.path()), before);  // (as root, permissions alone would not have stopped a write)
 }

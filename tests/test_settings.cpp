@@ -19,7 +19,8 @@ std::string error_for(const nlohmann::json& j) {
 }
 
 TEST(Settings, IntegerSettingsRefuseFractions) {
-  EXPECT_CONTAINS(error_for({{"num_downscales", 1.7}}), "config: num_downscales must be an integer in [0, 10] (got 1.7)");
+  EXPECT_CONTAINS(error_for({{"num_downscales", 1.7}}),
+                  "config: num_downscales must be an integer in [0, 10] (got 1.7)");
   EXPECT_CONTAINS(error_for({{"densify", {{"refine_every", 99.5}}}}), "densify.refine_every must be an integer");
   // A whole number written with a point is that integer.
   EXPECT_EQ(config_from_json({{"num_downscales", 1.0}}).num_downscales, 1);
@@ -35,9 +36,11 @@ TEST(Settings, ValuesBeyondTheTypeAreNamedAsWritten) {
 }
 
 TEST(Settings, MessagesStateTheWholeRange) {
-  EXPECT_CONTAINS(error_for({{"lr", {{"means", 1e30}}}}), "config: lr.means must be a number in (0, 10^18] (got 1e+30)");
+  EXPECT_CONTAINS(error_for({{"lr", {{"means", 1e30}}}}),
+                  "config: lr.means must be a number in (0, 10^18] (got 1e+30)");
   EXPECT_CONTAINS(error_for({{"iterations", 2e18}}), "iterations must be an integer in [1, 10^18] (got 2e+18)");
-  EXPECT_CONTAINS(error_for({{"appearance", {{"test_lr", 0}}}}), "appearance.test_lr must be a number in (0, 10^18] (got 0)");
+  EXPECT_CONTAINS(error_for({{"appearance", {{"test_lr", 0}}}}),
+                  "appearance.test_lr must be a number in (0, 10^18] (got 0)");
 }
 
 TEST(Settings, TypesAreCheckedWithTheSettingNamed) {
@@ -50,8 +53,8 @@ TEST(Settings, TypesAreCheckedWithTheSettingNamed) {
 // One name per setting: the colour rates are lr.colors_dc / lr.colors_rest and
 // distractors.lr.colors_dc; the names older files used still read.
 TEST(Settings, OldNamesReadAsTodays) {
-  const TrainConfig c = config_from_json({{"lr", {{"sh_dc", 0.125}, {"sh_rest", 0.25}}},
-                                          {"distractors", {{"lr", {{"rgb", 0.5}}}}}});
+  const TrainConfig c =
+      config_from_json({{"lr", {{"sh_dc", 0.125}, {"sh_rest", 0.25}}}, {"distractors", {{"lr", {{"rgb", 0.5}}}}}});
   EXPECT_EQ(c.lr.colors_dc, 0.125f);
   EXPECT_EQ(c.lr.colors_rest, 0.25f);
   EXPECT_EQ(c.distractors.lr.colors_dc, 0.5f);

@@ -91,9 +91,11 @@ TEST_F(SettingsCli, ConfigMustBeAnObjectOrAFile) {
 // A run's whole config.json (as the README suggests) reproduces its settings.
 TEST_F(SettingsCli, ARunsOwnConfigJsonIsAccepted) {
   const fs::path first = root_ / "first", second = root_ / "second";
-  const Outcome a = run(train(first) + R"( --iterations 4 --effects distractors --config '{"densify": {"warmup": 7}}')");
+  const Outcome a =
+      run(train(first) + R"( --iterations 4 --effects distractors --config '{"densify": {"warmup": 7}}')");
   ASSERT_EQ(a.exit_code, 0) << a.output;
-  const Outcome b = run(train(second) + " --iterations 3 --effects distractors --config " + (first / "config.json").string());
+  const Outcome b =
+      run(train(second) + " --iterations 3 --effects distractors --config " + (first / "config.json").string());
   ASSERT_EQ(b.exit_code, 0) << b.output;
   EXPECT_CONTAINS(b.output, "its \"train\" settings apply");
   nlohmann::json ta = read_json(first / "config.json")["train"], tb = read_json(second / "config.json")["train"];
@@ -126,8 +128,8 @@ TEST_F(SettingsCli, RenderNamesADamagedConfigJson) {
   const fs::path model = root_ / "model";
   const Outcome a = run(train(model) + " --iterations 2 --effects none");
   ASSERT_EQ(a.exit_code, 0) << a.output;
-  const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + model.string() + " --out " +
-                             (root_ / "renders").string();
+  const std::string render =
+      std::string(DESPLAT_RENDER_BIN) + " --model " + model.string() + " --out " + (root_ / "renders").string();
   const fs::path config = model / "config.json";
   const nlohmann::json good = read_json(config);
   const auto expect_named = [&](const std::string& text, const std::string& message) {

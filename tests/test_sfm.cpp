@@ -25,8 +25,8 @@
 #include "desplat/sfm/sfm.hpp"
 #include "sfm/match_evidence.hpp"
 #include "support/expect.hpp"
-#include "support/fox_scene.hpp"
 #include "support/fake_colmap.hpp"
+#include "support/fox_scene.hpp"
 #include "support/scoped_env.hpp"
 #include "support/temp_dir.hpp"
 
@@ -63,11 +63,17 @@ TEST_F(FakeColmap, RunsTheThreeStagesWithCpuOptionsAndReportsProgress) {
   // Progress: each stage in order, its colmap numbers parsed, and a final report per stage.
   std::vector<std::string> lines;
   for (const auto& p : progress_) lines.push_back(sfm::describe(p));
-  const std::vector<std::string> expected = {
-      "extracting features: image 0/6",  "extracting features: image 1/3", "extracting features: image 3/3",
-      "extracting features: image 3/3, done", "matching: block 0/1",    "matching: block 1/1",
-      "matching: block 1/1, done",       "mapping: registered 0/6 photos", "mapping: registered 2/6 photos",
-      "mapping: registered 3/6 photos",  "mapping: registered 5/6 photos, done"};
+  const std::vector<std::string> expected = {"extracting features: image 0/6",
+                                             "extracting features: image 1/3",
+                                             "extracting features: image 3/3",
+                                             "extracting features: image 3/3, done",
+                                             "matching: block 0/1",
+                                             "matching: block 1/1",
+                                             "matching: block 1/1, done",
+                                             "mapping: registered 0/6 photos",
+                                             "mapping: registered 2/6 photos",
+                                             "mapping: registered 3/6 photos",
+                                             "mapping: registered 5/6 photos, done"};
   EXPECT_EQ(lines, expected);
 }
 
@@ -135,8 +141,9 @@ TEST_F(FakeColmap, TooFewRegisteredKeepsThePartialModel) {
   EXPECT_CONTAINS(e.what(), "only 2 of 6 photos could be placed (at least 3 needed); take more overlapping photos");
   EXPECT_EQ(std::string(e.what()).find("--min-registered-share"), std::string::npos);  // 2 photos: never enough
   // The model holds p0 and p1: the message names the four photos it lost.
-  EXPECT_CONTAINS(e.what(), "4 of 6 photos could not be placed by structure from motion (not in the model, so not "
-                            "trained on):\n  p2.png: ");
+  EXPECT_CONTAINS(e.what(),
+                  "4 of 6 photos could not be placed by structure from motion (not in the model, so not "
+                  "trained on):\n  p2.png: ");
   EXPECT_CONTAINS(e.what(), "\n  p5.png: ");
   EXPECT_EQ(colmap::read_model(options_.out / "sparse" / "0").images.size(), 2u);
 }
@@ -184,9 +191,9 @@ TEST_F(FakeColmap, BadImageFolders) {
 
   options_.images = tmp_.path() / "two";
   write_tiny_photos(options_.images, 2);
-  EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadImages).what(),
-                  "found only 2 photo(s) in '" + options_.images.string() +
-                      "'; structure from motion needs at least 3");
+  EXPECT_CONTAINS(
+      expect_error(options_, SfmErrorKind::BadImages).what(),
+      "found only 2 photo(s) in '" + options_.images.string() + "'; structure from motion needs at least 3");
   EXPECT_FALSE(fs::exists(options_.out));
 }
 
@@ -217,8 +224,6 @@ TEST_F(FakeColmap, FindsPhotosRecursivelyAndNamesEveryFileItSkips) {
   EXPECT_EQ(scan.skipped[3].path, fs::path("notes.txt"));
   EXPECT_CONTAINS(scan.skipped[3].reason, "not a photo");
 }
-
-
 
 // A 32×24 JPEG that records these EXIF fields (as a camera would).
 void write_jpeg_with_exif(const fs::path& path, const char* make, const char* model, float focal_mm) {

@@ -25,8 +25,8 @@
 #include "desplat/sfm/sfm.hpp"
 #include "sfm/match_evidence.hpp"
 #include "support/expect.hpp"
-#include "support/fox_scene.hpp"
 #include "support/fake_colmap.hpp"
+#include "support/fox_scene.hpp"
 #include "support/scoped_env.hpp"
 #include "support/temp_dir.hpp"
 
@@ -138,7 +138,7 @@ TEST_F(FakeColmap, EscalatesStepByStepUntilNinetyPercentArePlacedAndKeepsTheLarg
   write_tiny_photos(photos_, 10);
   options_.escalate = true;
   const fs::path models = tmp_.path() / "models";
-  colmap::write_model_binary(fake_model(6), models / "0");    // colmap's defaults: 6 of 10
+  colmap::write_model_binary(fake_model(6), models / "0");                   // colmap's defaults: 6 of 10
   colmap::write_model_binary(fake_model(8), models.string() + ".2" + "/0");  // relaxed mapper: 8
   colmap::write_model_binary(fake_model(10), tmp_.path() / "registered");    // registering the rest: 10
   models_env_.emplace("FAKE_COLMAP_MODELS", models.string());
@@ -159,8 +159,9 @@ TEST_F(FakeColmap, EscalatesStepByStepUntilNinetyPercentArePlacedAndKeepsTheLarg
   ASSERT_EQ(mappers.size(), 2u);
   EXPECT_EQ(mappers[0].find("init_min_num_inliers"), std::string::npos);
   EXPECT_CONTAINS(mappers[1], "--output_path " + (out / "attempts/1-relaxed-mapper/sparse").string());
-  EXPECT_CONTAINS(mappers[1], "--Mapper.init_min_num_inliers 30 --Mapper.init_min_tri_angle 4 "
-                              "--Mapper.abs_pose_min_num_inliers 15");
+  EXPECT_CONTAINS(mappers[1],
+                  "--Mapper.init_min_num_inliers 30 --Mapper.init_min_tri_angle 4 "
+                  "--Mapper.abs_pose_min_num_inliers 15");
   const auto registrations = calls_of(args_log_, "image_registrator");
   ASSERT_EQ(registrations.size(), 1u);  // into the best model so far, the relaxed mapper's
   EXPECT_CONTAINS(registrations[0], "--input_path " + (out / "attempts/1-relaxed-mapper/sparse/0").string());
@@ -178,7 +179,7 @@ TEST_F(FakeColmap, EscalatesStepByStepUntilNinetyPercentArePlacedAndKeepsTheLarg
 TEST_F(FakeColmap, WhenCheapStepsFallShortItMatchesAgainOnACopyOfTheFeaturesThenExtractsMore) {
   write_tiny_photos(photos_, 10);
   options_.escalate = true;
-  const fs::path models = tmp_.path() / "models";  // no model from colmap's defaults at all
+  const fs::path models = tmp_.path() / "models";                       // no model from colmap's defaults at all
   colmap::write_model_binary(fake_model(5), models.string() + ".2/0");  // relaxed mapper
   colmap::write_model_binary(fake_model(7), models.string() + ".3/0");  // guided matching
   colmap::write_model_binary(fake_model(6), models.string() + ".4/0");  // more features
@@ -194,8 +195,9 @@ TEST_F(FakeColmap, WhenCheapStepsFallShortItMatchesAgainOnACopyOfTheFeaturesThen
                                              "guided matching 7", "register the rest 7", "more features 6",
                                              "register the rest 7"}));
   EXPECT_EQ(r.num_registered, 7);
-  EXPECT_EQ(r.warning, "3 of 10 photos could not be placed even after escalation; they are not trained on (see the "
-                       "list below)");
+  EXPECT_EQ(r.warning,
+            "3 of 10 photos could not be placed even after escalation; they are not trained on (see the "
+            "list below)");
   const fs::path out = options_.out, guided = out / "attempts/3-guided-matching";
   // Guided matching ran on a copy of the first features with the matches removed (colmap's
   // matcher skips pairs it has); the first database keeps its matches.
@@ -271,8 +273,14 @@ TEST_F(FakeColmap, ResultNamesSkippedFilesAndEveryUnplacedPhotoWithItsReason) {
   colmap::write_model_binary(separate, models / "1");
   models_env_.emplace("FAKE_COLMAP_MODELS", models.string());
   const fs::path db = tmp_.path() / "colmap.db";
-  write_colmap_database(db, {{"p0.png", 900}, {"p1.png", 900}, {"p2.png", 900}, {"p3.png", 40}, {"p4.png", 2000},
-                             {"p5.png", 900}, {"p6.png", 2000}},
+  write_colmap_database(db,
+                        {{"p0.png", 900},
+                         {"p1.png", 900},
+                         {"p2.png", 900},
+                         {"p3.png", 40},
+                         {"p4.png", 2000},
+                         {"p5.png", 900},
+                         {"p6.png", 2000}},
                         {{1, 2, 300}, {1, 7, 50}, {2, 7, 20}, {1, 3, 200}});
   ScopedEnv db_env("FAKE_COLMAP_DB", db.string());
   options_.min_registered_share = 0.4;  // ⌈2.8⌉ = 3 of 7
@@ -349,7 +357,8 @@ TEST_F(FakeColmap, BadOptions) {
   options_.camera_model = "OPENCV";
   for (double share : {0.0, -0.5, 1.5, std::nan("")}) {
     options_.min_registered_share = share;
-    EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadOptions).what(), "--min-registered-share must be in (0, 1]");
+    EXPECT_CONTAINS(expect_error(options_, SfmErrorKind::BadOptions).what(),
+                    "--min-registered-share must be in (0, 1]");
   }
 }
 

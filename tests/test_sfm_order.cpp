@@ -171,9 +171,9 @@ TEST(CaptureOrder, TheFoxVideoIsOrderedAndItsFramesShuffledAreNot) {
 
 TEST(CaptureOrder, AutoMatcherFollowsCountAndOrder) {
   using sfm::Matcher;
-  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 100, true), Matcher::Exhaustive);       // few: every pair
-  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 101, true), Matcher::Sequential);       // many, in order
-  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 300, false), Matcher::Exhaustive);      // a large collection
+  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 100, true), Matcher::Exhaustive);        // few: every pair
+  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 101, true), Matcher::Sequential);        // many, in order
+  EXPECT_EQ(sfm::choose_matcher(Matcher::Auto, 300, false), Matcher::Exhaustive);       // a large collection
   EXPECT_EQ(sfm::choose_matcher(Matcher::Sequential, 20, false), Matcher::Sequential);  // as asked
 }
 

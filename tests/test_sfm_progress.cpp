@@ -29,8 +29,9 @@ TEST(SfmHelpers, PhotosThatAgreeOnSizeAndExifShareOneCamera) {
   const sfm::PhotoCamera plain{540, 960, "", "", 0.0f};  // video frames: no EXIF
   auto choice = sfm::choose_cameras(CameraSharing::Auto, {phone, phone, phone});
   EXPECT_TRUE(choice.single);
-  EXPECT_EQ(choice.reason, "one shared camera: all 3 photos are 1080x1440 with the same camera make, model and "
-                           "focal length in EXIF (or none recorded)");
+  EXPECT_EQ(choice.reason,
+            "one shared camera: all 3 photos are 1080x1440 with the same camera make, model and "
+            "focal length in EXIF (or none recorded)");
   EXPECT_TRUE(sfm::choose_cameras(CameraSharing::Auto, {plain, plain}).single);
 
   sfm::PhotoCamera zoomed = phone;

@@ -24,8 +24,8 @@
 #include "desplat/sfm/sfm.hpp"
 #include "sfm/match_evidence.hpp"
 #include "support/expect.hpp"
-#include "support/fox_scene.hpp"
 #include "support/fake_colmap.hpp"
+#include "support/fox_scene.hpp"
 #include "support/scoped_env.hpp"
 #include "support/temp_dir.hpp"
 
@@ -140,10 +140,11 @@ TEST(SfmReal, SevenFoxPhotosMatchTheReferenceModelUpToASimilarity) {
   o.on_progress = [&](const sfm::SfmProgress& p) { progress.push_back(p); };
   const sfm::SfmResult r = sfm::run_sfm(o);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("real colmap on 7 photos: %.1f s (run_sfm %.1f s: extract %.1f, match %.1f, map %.1f), %d registered, "
-              "%d points, mean track length %.2f, mean reprojection error %.3f px\n",
-              seconds, r.seconds, r.extract_seconds, r.match_seconds, r.map_seconds, r.num_registered, r.num_points,
-              r.mean_track_length, r.mean_reprojection_error);
+  std::printf(
+      "real colmap on 7 photos: %.1f s (run_sfm %.1f s: extract %.1f, match %.1f, map %.1f), %d registered, "
+      "%d points, mean track length %.2f, mean reprojection error %.3f px\n",
+      seconds, r.seconds, r.extract_seconds, r.match_seconds, r.map_seconds, r.num_registered, r.num_points,
+      r.mean_track_length, r.mean_reprojection_error);
 
   EXPECT_GE(r.num_registered, 5);
   EXPECT_EQ(r.num_photos, 7);
@@ -245,7 +246,7 @@ TEST(SfmReal, EveryEscalationStepRunsOnColmapAndKeepsThePlacedPhotos) {
   std::printf("[   info   ] %s%.1f s\n", steps.c_str(), r.seconds);
   ASSERT_EQ(r.attempts.size(), 7u) << steps;
   EXPECT_EQ(r.attempts[6].step, "register the rest");
-  EXPECT_TRUE(r.cameras.single);  // one size, no EXIF
+  EXPECT_TRUE(r.cameras.single);                                          // one size, no EXIF
   for (const auto& a : r.attempts) EXPECT_LE(a.registered, 7) << a.step;  // noise is never placed
   EXPECT_GE(r.num_registered, r.attempts[0].registered);
   EXPECT_GE(r.num_registered, 5);

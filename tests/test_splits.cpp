@@ -98,8 +98,8 @@ TEST(Splits, NameListErrors) {
 }
 
 TEST(Splits, RobustNeRFTrainsOnClutterAndTestsOnExtra) {
-  const std::vector<std::string> names = {"1extra000.JPG", "2clutter000.JPG", "0clean000.JPG", "2clutter001.JPG",
-                                          "1extra001.JPG", "0clean001.JPG"};
+  const std::vector<std::string> names = {"1extra000.JPG",   "2clutter000.JPG", "0clean000.JPG",
+                                          "2clutter001.JPG", "1extra001.JPG",   "0clean001.JPG"};
   EXPECT_EQ(assign_split(names, rule(SplitRule::RobustNeRF)),
             (std::vector<R>{R::Test, R::Train, R::Unused, R::Train, R::Test, R::Unused}));
   EXPECT_CONTAINS(error_of({"1extra000.JPG", "photo.JPG"}, rule(SplitRule::RobustNeRF)),
@@ -157,7 +157,7 @@ TEST(Splits, PhotoTourismTsv) {
                "filename\tid\tsplit\tdataset\n"
                "01.jpg\t0\ttrain\tbrandenburg\n"
                "02.jpg\t1\ttest\tbrandenburg\n"
-               "03.jpg\t\ttrain\tbrandenburg\n"   // no id: skipped, as NeRF-W does
+               "03.jpg\t\ttrain\tbrandenburg\n"    // no id: skipped, as NeRF-W does
                "04.jpg\tnan\ttest\tbrandenburg\n"  // also skipped (and not in the model)
                "\n");
   SplitOptions o = rule(SplitRule::PhotoTourism);

@@ -12,7 +12,8 @@
 namespace desplat::raster {
 namespace {
 
-template <int N> using Jet = ceres::Jet<double, N>;
+template <int N>
+using Jet = ceres::Jet<double, N>;
 
 // Float VJPs of single stages involve ≤ ~50 flops on O(1) values, so their error is
 // a few float ulps of the largest term: 1e-5 relative to the gradient's magnitude.
@@ -152,7 +153,6 @@ TEST(StageVjp, ShColorAllDegrees) {
     }
 }
 
-
 // RowChords (tiles.hpp) against the pixel loops' own test, pixel by pixel. Random ellipses
 // from round to needle-thin (standard deviations √0.3 … 400 px, the forward's dilation is the
 // floor), any tilt, centres in and around a 64×64 image, opacity 2·10⁻³ … 1; boxes as the
@@ -168,7 +168,8 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
   int64_t blended_halves = 0, empty_halves = 0, dropped_empty = 0, kept_blended = 0, needles = 0;
   for (int trial = 0; trial < 4000; ++trial) {
     const double s1 = std::exp(std::log(std::sqrt(0.3)) + u(rng) * std::log(400.0 / std::sqrt(0.3)));
-    const double s2 = trial % 3 == 0 ? std::sqrt(0.3) + 0.2 * u(rng) : std::exp(std::log(std::sqrt(0.3)) + u(rng) * std::log(400.0 / std::sqrt(0.3)));
+    const double s2 = trial % 3 == 0 ? std::sqrt(0.3) + 0.2 * u(rng)
+                                     : std::exp(std::log(std::sqrt(0.3)) + u(rng) * std::log(400.0 / std::sqrt(0.3)));
     const double th = 3.14159265358979 * u(rng), co = std::cos(th), si = std::sin(th);
     const double cxx = co * co * s1 * s1 + si * si * s2 * s2, cyy = si * si * s1 * s1 + co * co * s2 * s2;
     const double cxy = co * si * (s1 * s1 - s2 * s2), det = cxx * cyy - cxy * cxy;
@@ -177,8 +178,10 @@ TEST(RowChords, KeepEveryHalfThePixelLoopsBlendAndDropTheEmptyOnes) {
     const float mx = float(-40.0 + (kImage + 80.0) * u(rng)), my = float(-40.0 + (kImage + 80.0) * u(rng));
     const float k = opacity_extent_sigmas(o);
     if (k == 0.0f) continue;
-    const int rx = int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cxx))), std::ceil(k * std::sqrt(float(cxx)))));
-    const int ry = int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cyy))), std::ceil(k * std::sqrt(float(cyy)))));
+    const int rx =
+        int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cxx))), std::ceil(k * std::sqrt(float(cxx)))));
+    const int ry =
+        int(std::min(std::ceil(kExtentSigmas * std::sqrt(float(cyy))), std::ceil(k * std::sqrt(float(cyy)))));
     needles += std::max(s1, s2) > 30 * std::min(s1, s2);
     const double level = std::log(255.0 * double(o));
     const double px = rx + 1.0, py = ry + 1.0;

@@ -23,7 +23,8 @@ std::string sh() { return find_executable("sh").value().string(); }
 
 TEST(Subprocess, MissingProgramIsOneClearError) {
   EXPECT_CONTAINS(testing::error_of<SubprocessError>([] {
-                    run_subprocess({"/nonexistent/colmap", "mapper"}, [](std::string_view) {}, 0);
+                    run_subprocess(
+                        {"/nonexistent/colmap", "mapper"}, [](std::string_view) {}, 0);
                   }),
                   "cannot start '/nonexistent/colmap'");
   EXPECT_EQ(find_executable("no-such-program-anywhere"), std::nullopt);
@@ -31,8 +32,8 @@ TEST(Subprocess, MissingProgramIsOneClearError) {
 
 TEST(Subprocess, ExitCodeAndMergedOutputAreReported) {
   std::string output;
-  const ProcessExit exit =
-      run_subprocess({sh(), "-c", "echo out; echo err 1>&2; exit 3"}, [&](std::string_view s) { output += s; }, 0);
+  const ProcessExit exit = run_subprocess(
+      {sh(), "-c", "echo out; echo err 1>&2; exit 3"}, [&](std::string_view s) { output += s; }, 0);
   EXPECT_EQ(exit.how, ProcessExit::How::Exited);
   EXPECT_EQ(exit.code, 3);
   EXPECT_FALSE(exit.ok());
@@ -40,7 +41,8 @@ TEST(Subprocess, ExitCodeAndMergedOutputAreReported) {
 }
 
 TEST(Subprocess, SignalIsReported) {
-  const ProcessExit exit = run_subprocess({sh(), "-c", "kill -9 $$"}, [](std::string_view) {}, 0);
+  const ProcessExit exit = run_subprocess(
+      {sh(), "-c", "kill -9 $$"}, [](std::string_view) {}, 0);
   EXPECT_EQ(exit.how, ProcessExit::How::Signaled);
   EXPECT_EQ(exit.code, 9);
 }
@@ -48,8 +50,8 @@ TEST(Subprocess, SignalIsReported) {
 TEST(Subprocess, HungProgramIsStoppedAtItsTimeLimitAndReaped) {
   std::string output;
   // Prints its pid, then sleeps far past the limit (exec: the shell becomes sleep, same pid).
-  const ProcessExit exit =
-      run_subprocess({sh(), "-c", "echo $$; exec sleep 60"}, [&](std::string_view s) { output += s; }, 0.5);
+  const ProcessExit exit = run_subprocess(
+      {sh(), "-c", "echo $$; exec sleep 60"}, [&](std::string_view s) { output += s; }, 0.5);
   EXPECT_EQ(exit.how, ProcessExit::How::TimedOut);
   const pid_t pid = std::stoi(output);
   // Reaped: the pid is no child of ours any more, and no process has it.
@@ -60,8 +62,8 @@ TEST(Subprocess, HungProgramIsStoppedAtItsTimeLimitAndReaped) {
 
 TEST(Subprocess, ProgramIgnoringTermIsKilled) {
   std::string output;
-  const ProcessExit exit = run_subprocess({sh(), "-c", "trap '' TERM; echo $$; while :; do sleep 1; done"},
-                                          [&](std::string_view s) { output += s; }, 0.3);
+  const ProcessExit exit = run_subprocess(
+      {sh(), "-c", "trap '' TERM; echo $$; while :; do sleep 1; done"}, [&](std::string_view s) { output += s; }, 0.3);
   EXPECT_EQ(exit.how, ProcessExit::How::TimedOut);
   EXPECT_EQ(::kill(std::stoi(output), 0), -1);
 }
@@ -79,7 +81,9 @@ TEST(Subprocess, FindExecutableSearchesPathForExecutableFiles) {
 }
 
 TEST(Subprocess, ANegativeTimeLimitIsRefused) {
-  EXPECT_THROW(run_subprocess({sh(), "-c", "true"}, [](std::string_view) {}, -1), std::invalid_argument);
+  EXPECT_THROW(run_subprocess(
+                   {sh(), "-c", "true"}, [](std::string_view) {}, -1),
+               std::invalid_argument);
 }
 
 }  // namespace

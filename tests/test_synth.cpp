@@ -189,8 +189,8 @@ TEST(Synth, ColmapModelAnalyzerAcceptsTheModel) {
   generate(tiny("tiny_distractors.json"), t.path() / "scene");
   const colmap::Model m = colmap::read_model(t.path() / "scene" / "sparse" / "0");
   const fs::path log = t.path() / "analyzer.log";
-  const std::string cmd =
-      "colmap model_analyzer --path '" + (t.path() / "scene" / "sparse" / "0").string() + "' > '" + log.string() + "' 2>&1";
+  const std::string cmd = "colmap model_analyzer --path '" + (t.path() / "scene" / "sparse" / "0").string() + "' > '" +
+                          log.string() + "' 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << bytes_of(log);
   const std::string text = bytes_of(log);
   std::smatch images, points;
@@ -202,7 +202,8 @@ TEST(Synth, ColmapModelAnalyzerAcceptsTheModel) {
 
 TEST(Synth, PointsProjectExactlyOntoTheirObservationsWithoutNoise) {
   TempDir t;
-  generate(tiny("tiny_clean.json", {{"points.position_noise_px", 0}, {"points.observation_noise_px", 0}}), t.path() / "s");
+  generate(tiny("tiny_clean.json", {{"points.position_noise_px", 0}, {"points.observation_noise_px", 0}}),
+           t.path() / "s");
   const Residuals r = residuals(colmap::read_model(t.path() / "s" / "sparse" / "0"));
   ASSERT_GT(r.count, 500u);
   EXPECT_LT(r.max, 1e-6);
@@ -246,7 +247,8 @@ TEST(Synth, DistortedForwardFacingCameraProjectsAndRendersThroughItsLens) {
       const colmap::Image& im = m.images.at(tr.image_id);
       const auto q = to_camera(im, p.xyz);
       const auto lens = to_pixel(m.cameras.at(1), q), pin = to_pixel(m.cameras.at(1), q, false);
-      if (std::hypot(lens[0] - pin[0], lens[1] - pin[1]) < 2 || pin[0] < 0 || pin[1] < 0 || pin[0] >= 64 || pin[1] >= 48)
+      if (std::hypot(lens[0] - pin[0], lens[1] - pin[1]) < 2 || pin[0] < 0 || pin[1] < 0 || pin[0] >= 64 ||
+          pin[1] >= 48)
         continue;
       const auto value = [&](const std::array<double, 2>& px, int c) {
         const size_t i = (static_cast<size_t>(px[1]) * 64 + static_cast<size_t>(px[0])) * 3 + static_cast<size_t>(c);
@@ -273,7 +275,8 @@ TEST(Synth, MasksAreNonEmptyExactlyInTheClutteredTrainingViews) {
   for (int k = 0; k < 16; ++k) {
     const std::string name = synth::view_name(k, 16);
     const fs::path mask_file = t.path() / "s" / "distractor_masks" / name;
-    const std::string images = bytes_of(t.path() / "s" / "images" / name), clean = bytes_of(t.path() / "s" / "clean" / name);
+    const std::string images = bytes_of(t.path() / "s" / "images" / name),
+                      clean = bytes_of(t.path() / "s" / "clean" / name);
     if (k % 8 == 0) {  // test view: no mask, no distractors
       EXPECT_FALSE(fs::exists(mask_file)) << name;
       EXPECT_EQ(images, clean) << name;
@@ -319,8 +322,10 @@ TEST(Synth, MasksAreNonEmptyExactlyInTheClutteredTrainingViews) {
 // distractors, so within a run the masks should agree but for rounding at the silhouettes.
 TEST(Synth, DistractorTracksRepeatTheSameObjectsInTheFrameForConsecutiveTrainingViews) {
   TempDir t;
-  generate(tiny("tiny_distractors.json", {{"distractors.clutter_ratio", 1.0}, {"distractors.track_length", 3},
-                                          {"supersampling", 1}, {"points.count", 0}}),
+  generate(tiny("tiny_distractors.json", {{"distractors.clutter_ratio", 1.0},
+                                          {"distractors.track_length", 3},
+                                          {"supersampling", 1},
+                                          {"points.count", 0}}),
            t.path() / "s");
   std::vector<FloatImage> masks;
   for (int k = 0; k < 16; ++k)
@@ -346,7 +351,8 @@ TEST(Synth, DistractorTracksRepeatTheSameObjectsInTheFrameForConsecutiveTraining
 
 TEST(Synth, WithOneSamplePerPixelTheMaskIsExactlyWhereThePhotoShowsADistractor) {
   TempDir t;
-  const auto report = generate(tiny("tiny_distractors.json", {{"supersampling", 1}, {"points.count", 0}}), t.path() / "s");
+  const auto report =
+      generate(tiny("tiny_distractors.json", {{"supersampling", 1}, {"points.count", 0}}), t.path() / "s");
   ASSERT_FALSE(report.cluttered_views.empty());
   for (const std::string& name : report.cluttered_views) {
     const FloatImage mask = read_image_rgb(t.path() / "s" / "distractor_masks" / name);
@@ -435,7 +441,8 @@ TEST(Synth, EachEffectWorksAlone) {
 
 TEST(Synth, SameSeedSameBytesAnyThreadCountDifferentSeedDifferentScene) {
   TempDir t;
-  const auto d = tiny("tiny_distractors.json", {{"noise.sigma", 0.02}, {"exposure.stops", 0.3}, {"views.position_jitter", 0.1}});
+  const auto d =
+      tiny("tiny_distractors.json", {{"noise.sigma", 0.02}, {"exposure.stops", 0.3}, {"views.position_jitter", 0.1}});
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
   generate(d, t.path() / "a");
@@ -471,12 +478,11 @@ TEST(Synth, CheckedInDescriptionsLoadAndLayerOnTheirBase) {
               synth::apply_description(bench, {{"distractors", {{"clutter_ratio", pct / 100.0}}}}, "test"))
         << file;
   }
-  EXPECT_EQ(synth::load_description(kDescriptions / "bench_1080p_300.json"),
-            synth::apply_description(bench,
-                                     {{"camera", {{"width", 1920}, {"height", 1080}}},
-                                      {"views", {{"count", 300}}},
-                                      {"supersampling", 1}},
-                                     "test"));
+  EXPECT_EQ(
+      synth::load_description(kDescriptions / "bench_1080p_300.json"),
+      synth::apply_description(
+          bench, {{"camera", {{"width", 1920}, {"height", 1080}}}, {"views", {{"count", 300}}}, {"supersampling", 1}},
+          "test"));
 }
 
 TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {
@@ -497,7 +503,8 @@ TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {
   expect_error(write("type.json", R"({"views": {"count": "eight"}})"), {"views.count", "\"eight\""});
   expect_error(write("ratio.json", R"({"distractors": {"clutter_ratio": 1.5}})"), {"distractors.clutter_ratio", "1.5"});
   expect_error(write("range.json", R"({"distractors": {"per_view": [3, 1]}})"), {"distractors.per_view", "min <= max"});
-  expect_error(write("shape.json", R"({"world": {"objects": [{"shape": "cone"}]}})"), {"world.objects[0].shape", "cone"});
+  expect_error(write("shape.json", R"({"world": {"objects": [{"shape": "cone"}]}})"),
+               {"world.objects[0].shape", "cone"});
   expect_error(write("pinhole.json", R"({"camera": {"distortion": [0.1, 0, 0, 0]}})"), {"camera.distortion", "OPENCV"});
   expect_error(write("syntax.json", R"({"seed": )"), {"not valid JSON"});
   expect_error(write("missing_base.json", R"({"base": "nowhere.json"})"), {"nowhere.json", "does not exist"});
@@ -505,9 +512,11 @@ TEST(Synth, DescriptionErrorsNameTheFileAndTheKey) {
   expect_error(write("loop_b.json", R"({"base": "loop_a.json"})"), {"loops"});
   // An error in a base file names the base file.
   const fs::path bad_base = write("bad_base.json", R"({"noise": {"sigma": -1}})");
-  const std::string msg = error_of([&] { synth::load_description(write("child.json", R"({"base": "bad_base.json"})")); });
+  const std::string msg =
+      error_of([&] { synth::load_description(write("child.json", R"({"base": "bad_base.json"})")); });
   EXPECT_NE(msg.find(bad_base.string() + ": key 'noise.sigma'"), std::string::npos) << msg;
-  EXPECT_NE(error_of([&] { synth::load_description(t.path() / "absent.json"); }).find("absent.json"), std::string::npos);
+  EXPECT_NE(error_of([&] { synth::load_description(t.path() / "absent.json"); }).find("absent.json"),
+            std::string::npos);
 }
 
 TEST(Synth, OutputFolderIsOnlyReplacedWhenAsked) {

@@ -3,12 +3,12 @@
 // views, and bad input.
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imageio.h>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
-#include <OpenImageIO/imageio.h>
+#include <set>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/ply.hpp"
@@ -26,8 +26,9 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   const fs::path out = root_ / "out";
   // 200 distractors per view (the default density gives 16 on 64×48 images): enough that some
   // still cover their view after 120 steps, for the layer and mask checks below.
-  const Outcome r = run(train() + " --out " + out.string() +
-                        " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200 --effects distractors");
+  const Outcome r = run(
+      train() + " --out " + out.string() +
+      " --iterations 120 --threads 2 --log-every 40 --eval-every 60 --distractors-per-view 200 --effects distractors");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("120/120"), std::string::npos) << r.output;  // plain progress lines in a pipe
   // 120 steps end inside the default resolution schedule (full resolution from step 6,000).
@@ -43,7 +44,8 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   std::ifstream(out / "metrics.json") >> metrics;
   EXPECT_EQ(metrics["step"], 120);
   int evaluations = 0, curve_points = 0;
-  for (const auto& h : metrics["history"]) evaluations += h["kind"] == "evaluation", curve_points += h["kind"] == "training";
+  for (const auto& h : metrics["history"])
+    evaluations += h["kind"] == "evaluation", curve_points += h["kind"] == "training";
   EXPECT_EQ(evaluations, 1);     // at step 60; the final one is the metrics' own
   EXPECT_EQ(curve_points, 120);  // the training curve: every step of a run this short
   EXPECT_GT(metrics["mean_psnr"].get<double>(), 15.0);
@@ -86,7 +88,9 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   // plain layer image, and its alpha agrees with the mask (A_d > 0.5).
   const fs::path plain = root_ / "layers_plain";
   ASSERT_EQ(run(std::string(DESPLAT_RENDER_BIN) + " --model " + out.string() + " --out " + plain.string() +
-                " --layer distractor --views view_1.png").exit_code, 0);
+                " --layer distractor --views view_1.png")
+                .exit_code,
+            0);
   OIIO::ImageSpec raw_file;  // the file's own straight values, as a viewer sees them
   raw_file.attribute("oiio:UnassociatedAlpha", 1);
   auto in = OIIO::ImageInput::open((layers / "view_1.png").string(), &raw_file);
@@ -114,7 +118,6 @@ TEST_F(TrainApp, TrainsAndWritesEveryOutput) {
   EXPECT_EQ(bad_layer.exit_code, 1);
   EXPECT_NE(bad_layer.output.find("view 'view_0.png' is not a training view"), std::string::npos) << bad_layer.output;
 }
-
 
 // A fresh run into a folder that holds an earlier run is refused (it would overwrite that
 // model's checkpoint and leave its renders next to the new ones); --overwrite replaces
@@ -164,13 +167,12 @@ TEST_F(TrainApp, StaticOnlyModelHasNoDistractorLayer) {
   EXPECT_NE(bad.output.find("--mask needs a DeSplat model"), std::string::npos) << bad.output;
 }
 
-
 // A scene with ground-truth masks: metrics.json scores every training view's distractor mask.
 TEST_F(TrainApp, MetricsScoreDistractorMasksWhenTheSceneHasThem) {
   synth::GenerateOptions g;
   g.out = root_ / "masked_scene";
-  const synth::GenerationReport scene =
-      synth::generate_scene(synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_distractors.json"), g);
+  const synth::GenerationReport scene = synth::generate_scene(
+      synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/tiny_distractors.json"), g);
   for (const std::string mode : {"", " --static-only"}) {
     const fs::path out = root_ / ("masked" + std::to_string(mode.size()));
     const Outcome r = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + g.out.string() + " --out " + out.string() +
@@ -209,7 +211,7 @@ TEST_F(TrainApp, NoTestViewsIsSaidNotScoredAsZero) {
 
 TEST_F(TrainApp, BadInputGivesOneClearError) {
   Outcome r = run(std::string(DESPLAT_TRAIN_BIN) + " --data " + (root_ / "nope").string() + " --out " +
-              (root_ / "o1").string());
+                  (root_ / "o1").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find((root_ / "nope").string()), std::string::npos) << r.output;
   const fs::path cfg = root_ / "bad.json";
@@ -224,12 +226,14 @@ TEST_F(TrainApp, BadInputGivesOneClearError) {
   std::ofstream(cfg) << R"({"resolution_schedule": 0})";
   r = run(train() + " --out " + (root_ / "o4").string() + " --config " + cfg.string());
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("resolution_schedule must be an integer in [1, 2147483647] (got 0)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("resolution_schedule must be an integer in [1, 2147483647] (got 0)"), std::string::npos)
+      << r.output;
   EXPECT_FALSE(fs::exists(root_ / "o4" / "checkpoint.ckpt"));
   // The same settings given as JSON text instead of a file, and a file that is not there.
   r = run(train() + " --out " + (root_ / "o4").string() + R"( --config '{"resolution_schedule": 0}')");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("--config text: config: resolution_schedule must be an integer in [1, 2147483647] (got 0)"), std::string::npos)
+  EXPECT_NE(r.output.find("--config text: config: resolution_schedule must be an integer in [1, 2147483647] (got 0)"),
+            std::string::npos)
       << r.output;
   r = run(train() + " --out " + (root_ / "o4").string() + R"( --config '{"seed": ')");
   EXPECT_EQ(r.exit_code, 1);
@@ -238,10 +242,11 @@ TEST_F(TrainApp, BadInputGivesOneClearError) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find((root_ / "absent.json").string()), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(root_ / "o4" / "checkpoint.ckpt"));
-  for (const auto& [option, message] : {std::pair{"--iterations 0", "--iterations: must be an integer in [1, 9223372036854775807] (got 0)"},
-                                        {"--checkpoint-every -3", "--checkpoint-every: must be an integer in [0, 2147483647] (got -3)"},
-                                        {"--eval-every -1", "--eval-every: must be an integer in [0, 2147483647] (got -1)"},
-                                        {"--downscale 1000", "--downscale: must be an integer in [1, 64] (got 1000)"}}) {
+  for (const auto& [option, message] :
+       {std::pair{"--iterations 0", "--iterations: must be an integer in [1, 9223372036854775807] (got 0)"},
+        {"--checkpoint-every -3", "--checkpoint-every: must be an integer in [0, 2147483647] (got -3)"},
+        {"--eval-every -1", "--eval-every: must be an integer in [0, 2147483647] (got -1)"},
+        {"--downscale 1000", "--downscale: must be an integer in [1, 64] (got 1000)"}}) {
     r = run(train() + " --out " + (root_ / "o5").string() + " " + option);
     EXPECT_NE(r.exit_code, 0) << option;
     EXPECT_NE(r.output.find(message), std::string::npos) << r.output;

@@ -2,12 +2,12 @@
 // desplat_render drawing a training view in that photo's own look.
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imageio.h>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
-#include <OpenImageIO/imageio.h>
+#include <set>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/ply.hpp"
@@ -42,7 +42,8 @@ void expect_render_in_view_1s_own_look(const fs::path& model, const fs::path& ro
 // background, exactly as the training figure's static column does.
 TEST_F(TrainApp, BackgroundModelRendersOverAPhotosOwnBackground) {
   const fs::path out = root_ / "sky";
-  const Outcome r = run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,background");
+  const Outcome r =
+      run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,background");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("background model: embeddings of 32 per training image"), std::string::npos) << r.output;
   nlohmann::json metrics;
@@ -59,14 +60,15 @@ TEST_F(TrainApp, BackgroundModelRendersOverAPhotosOwnBackground) {
 // the training figure's static column exactly, sky included.
 TEST_F(TrainApp, SharedEmbeddingRendersAsTheTrainerDrewIt) {
   const fs::path out = root_ / "both";
-  const Outcome r =
-      run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,appearance,background");
+  const Outcome r = run(train() + " --out " + out.string() +
+                        " --iterations 60 --threads 2 --effects distractors,appearance,background");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   nlohmann::json config;
   std::ifstream(out / "config.json") >> config;
   EXPECT_EQ(config["train"]["background"]["share_appearance_embedding"], true);
   const std::string render = std::string(DESPLAT_RENDER_BIN) + " --model " + out.string();
-  const Outcome ok = run(render + " --out " + (root_ / "both_look").string() + " --views view_1.png --appearance view_1.png");
+  const Outcome ok =
+      run(render + " --out " + (root_ / "both_look").string() + " --views view_1.png --appearance view_1.png");
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
   expect_static_column(read_image_rgb(out / "renders" / "train" / "view_1.png"),
                        read_image_rgb(root_ / "both_look" / "view_1.png"));
@@ -77,7 +79,8 @@ TEST_F(TrainApp, SharedEmbeddingRendersAsTheTrainerDrewIt) {
 // trainer drew it in NAME's figure row (renders/train, the view's own embedding).
 TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   const fs::path out = root_ / "appearance";
-  const Outcome r = run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,appearance");
+  const Outcome r =
+      run(train() + " --out " + out.string() + " --iterations 60 --threads 2 --effects distractors,appearance");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("appearance model: embeddings of 32 per training image"), std::string::npos) << r.output;
   nlohmann::json metrics, config;
@@ -110,26 +113,31 @@ TEST_F(TrainApp, AppearanceModelRendersInAPhotosLookAndSaysItsProtocol) {
   EXPECT_EQ(auto_config["run"]["effects"], chosen);
   EXPECT_EQ(auto_config["run"]["effects_chosen_by"], "auto");
   ASSERT_EQ(evidence["reasons"].size(), 3u);
-  EXPECT_EQ(evidence["reasons"][0].get<std::string>().rfind(transients ? "distractors on: " : "distractors off: ", 0), 0u)
+  EXPECT_EQ(evidence["reasons"][0].get<std::string>().rfind(transients ? "distractors on: " : "distractors off: ", 0),
+            0u)
       << evidence["reasons"][0];
   EXPECT_EQ(evidence["transients"]["views"].size(), auto_config["scene"]["train_views"].size());
   std::ifstream(root_ / "no_look" / "metrics.json") >> auto_metrics;
   EXPECT_EQ(auto_metrics["effects"]["evidence"]["transients"], evidence["transients"]);
   EXPECT_EQ(auto_metrics["mode"], transients ? "desplat" : "static-only");
   // … and trains exactly the model that names that set.
-  const Outcome named = run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects " + chosen);
+  const Outcome named =
+      run(train() + " --out " + (root_ / "named").string() + " --iterations 5 --threads 2 --effects " + chosen);
   ASSERT_EQ(named.exit_code, 0) << named.output;
   EXPECT_EQ(testing::slurp(root_ / "named" / "point_cloud.ply"), testing::slurp(root_ / "no_look" / "point_cloud.ply"));
   const Outcome none = run(std::string(DESPLAT_RENDER_BIN) + " --model " + (root_ / "no_look").string() + " --out " +
                            (root_ / "look3").string() + " --appearance view_1.png");
   EXPECT_EQ(none.exit_code, 1);
-  EXPECT_NE(none.output.find("was trained without an appearance or background model"), std::string::npos) << none.output;
-  const Outcome resume = run(train() + " --out " + out.string() + " --iterations 80 --threads 2 --resume --effects distractors");
+  EXPECT_NE(none.output.find("was trained without an appearance or background model"), std::string::npos)
+      << none.output;
+  const Outcome resume =
+      run(train() + " --out " + out.string() + " --iterations 80 --threads 2 --resume --effects distractors");
   EXPECT_EQ(resume.exit_code, 1);
   // The recorded settings are checked before the checkpoint is opened (restore_training_checkpoint's
   // own refusal is tested in test_appearance.cpp).
-  EXPECT_NE(resume.output.find("changes 1 of them: appearance.enabled false (true in " + (out / "config.json").string()),
-            std::string::npos)
+  EXPECT_NE(
+      resume.output.find("changes 1 of them: appearance.enabled false (true in " + (out / "config.json").string()),
+      std::string::npos)
       << resume.output;
 }
 

@@ -2,12 +2,12 @@
 // plot, and what structure from motion lost named in the log, metrics.json and the report.
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imageio.h>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
-#include <OpenImageIO/imageio.h>
+#include <set>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/ply.hpp"
@@ -41,7 +41,8 @@ std::string decode_base64(const std::string& text) {
 // blank or text-only one. The page's own script records what it found on <body>.
 TEST_F(TrainApp, ReportOpensInHeadlessChromiumWithEveryImageAndPlot) {
   const fs::path out = root_ / "report_run";
-  const Outcome r = run(train() + " --out " + out.string() + " --iterations 300 --threads 2 --eval-every 100 --effects distractors");
+  const Outcome r =
+      run(train() + " --out " + out.string() + " --iterations 300 --threads 2 --eval-every 100 --effects distractors");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("report.html (open it in a browser)"), std::string::npos) << r.output;
   ASSERT_TRUE(fs::exists(out / "report.html"));
@@ -71,7 +72,8 @@ TEST_F(TrainApp, ReportOpensInHeadlessChromiumWithEveryImageAndPlot) {
   const size_t at = frame_dom.output.find(key);
   ASSERT_NE(at, std::string::npos) << frame_dom.output.substr(0, 500);
   const size_t end = frame_dom.output.find('"', at + key.size());
-  write_file_atomically(root_ / "viewer.png", decode_base64(frame_dom.output.substr(at + key.size(), end - at - key.size())));
+  write_file_atomically(root_ / "viewer.png",
+                        decode_base64(frame_dom.output.substr(at + key.size(), end - at - key.size())));
   const FloatImage viewer = read_image_rgb(root_ / "viewer.png");
   ASSERT_EQ(viewer.width, 960);
   ASSERT_EQ(viewer.height, 720);
@@ -118,20 +120,21 @@ TEST_F(TrainApp, ReportOpensInHeadlessChromiumWithEveryImageAndPlot) {
   EXPECT_GT(coloured, 5000u);
 }
 
-
 // desplat_train --images runs structure from motion first; here a stand-in `colmap` on PATH
 // "finds" the scene's own model, which holds 16 of the 17 photos. What SfM lost, and every
 // step it took, must reach the log, metrics.json and report.html.
 TEST_F(TrainApp, PhotosStructureFromMotionLostAreNamedInLogMetricsAndReport) {
   const fs::path photos = root_ / "photos", bin = root_ / "fake_colmap_bin", out = root_ / "from_photos";
   fs::create_directories(photos);
-  for (const auto& e : fs::directory_iterator(root_ / "scene" / "images")) fs::copy_file(e.path(), photos / e.path().filename());
+  for (const auto& e : fs::directory_iterator(root_ / "scene" / "images"))
+    fs::copy_file(e.path(), photos / e.path().filename());
   fs::copy_file(root_ / "scene" / "images" / "view_1.png", photos / "extra.png");  // a photo no model holds
   write_file_atomically(photos / "notes.txt", "not a photo");
   fs::create_directories(bin);
-  const std::string fake = "#!/bin/sh\nprev=\"\"\nfor a in \"$@\"; do [ \"$prev\" = --output_path ] && out=\"$a\"; "
-                           "prev=\"$a\"; done\n[ \"$1\" = mapper ] && mkdir -p \"$out/0\" && cp " +
-                           (root_ / "scene" / "sparse" / "0").string() + "/* \"$out/0/\"\nexit 0\n";
+  const std::string fake =
+      "#!/bin/sh\nprev=\"\"\nfor a in \"$@\"; do [ \"$prev\" = --output_path ] && out=\"$a\"; "
+      "prev=\"$a\"; done\n[ \"$1\" = mapper ] && mkdir -p \"$out/0\" && cp " +
+      (root_ / "scene" / "sparse" / "0").string() + "/* \"$out/0/\"\nexit 0\n";
   write_file_atomically(bin / "colmap", fake);
   fs::permissions(bin / "colmap", fs::perms::owner_all);
   const Outcome r = run("PATH=" + bin.string() + ":$PATH " + std::string(DESPLAT_TRAIN_BIN) + " --images " +

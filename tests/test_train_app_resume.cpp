@@ -2,12 +2,12 @@
 // settings the model was trained with.
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imageio.h>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
-#include <OpenImageIO/imageio.h>
+#include <set>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/ply.hpp"
@@ -59,7 +59,8 @@ TEST_F(TrainApp, ResumeKeepsTheTrainedSettingsAndRefusesOtherOnes) {
 
   const Outcome refused = run(train() + " --out " + out.string() + " --resume --iterations 40 --preset paper");
   EXPECT_EQ(refused.exit_code, 1) << refused.output;
-  EXPECT_NE(refused.output.find("--resume continues the model with the settings it was trained with"), std::string::npos)
+  EXPECT_NE(refused.output.find("--resume continues the model with the settings it was trained with"),
+            std::string::npos)
       << refused.output;
   EXPECT_NE(refused.output.find("resolution_schedule 3000 (1000 in " + (out / "config.json").string() + ")"),
             std::string::npos)

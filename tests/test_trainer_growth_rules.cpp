@@ -12,8 +12,8 @@
 #include "desplat/train/distractors.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
-#include "desplat/train/view_residual.hpp"
 #include "desplat/train/trainer.hpp"
+#include "desplat/train/view_residual.hpp"
 #include "support/expect.hpp"
 #include "support/projection.hpp"
 #include "support/synthetic_views.hpp"
@@ -132,7 +132,8 @@ TEST(TrainerRules, AnEmptiedBufferOverAnOccluderIsSeededThere) {
     Trainer t(data, c);
     int64_t reseeded = 0;
     for (int i = 0; i < 400 && reseeded == 0; ++i) {
-      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
+      if (i < 250)
+        t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
       reseeded = t.step().reseeded;
     }
     ASSERT_GT(reseeded, 0) << "starved rule " << starved_rule;
@@ -225,7 +226,9 @@ TEST(TrainerRules, TheOccluderColourPriorMakesAOneViewSquaresDistractorsOpaqueAn
     return t;
   };
   const Trainer off = run(0.0f, 0), on = run(1.0f, 0), later = run(1.0f, 400);
-  struct Square { double alpha, colour_error; };
+  struct Square {
+    double alpha, colour_error;
+  };
   auto square = [&](const Trainer& t) {
     const ViewLayers layers = t.render_layers(0, {0, 0, 0});  // distractor over black: C_d
     Square s{0, 0};
@@ -258,13 +261,13 @@ TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
   TrainConfig c;
   c.num_downscales = 2;
   c.resolution_schedule = 3000;
-  EXPECT_TRUE(resolution_settled(c, 100, 430));    // before one period: compared with step 0
+  EXPECT_TRUE(resolution_settled(c, 100, 430));  // before one period: compared with step 0
   EXPECT_TRUE(resolution_settled(c, 2999, 430));
   EXPECT_FALSE(resolution_settled(c, 3000, 430));  // factor 2 now, 4 at step 2,570
   EXPECT_FALSE(resolution_settled(c, 3429, 430));
   EXPECT_TRUE(resolution_settled(c, 3430, 430));
   EXPECT_FALSE(resolution_settled(c, 6100, 430));
-  EXPECT_TRUE(resolution_settled(c, 9000, 430));   // full resolution from 6,000 on
+  EXPECT_TRUE(resolution_settled(c, 9000, 430));  // full resolution from 6,000 on
 
   // In a trainer: view 0 over a one-view white square, its buffer emptied before every step
   // up to 249. 8 views and one epoch per distractor refinement: a period of 8 steps;
@@ -276,7 +279,8 @@ TEST(TrainerRules, SeedingWaitsOnePeriodAfterAResolutionSwitch) {
     Trainer t(data, seeding_test_config(downscales));
     int64_t seeded_at = -1;
     for (int i = 0; i < 400 && seeded_at < 0; ++i) {
-      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
+      if (i < 250)
+        t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
       if (t.step().reseeded > 0) seeded_at = i;
     }
     if (downscales == 0) {
@@ -316,7 +320,7 @@ TEST(TrainerRules, SeedingWaitsForSeedAfterAndOnePeriodAfterAnOpacityReset) {
   EXPECT_FALSE(seeding_allowed(c, 1204, 105));  // 1,100 is within the last 105 steps
   EXPECT_TRUE(seeding_allowed(c, 1205, 105));
   EXPECT_FALSE(seeding_allowed(c, 2150, 105));
-  EXPECT_TRUE(seeding_allowed(c, 3100, 105));   // no reset from stop_split_at on
+  EXPECT_TRUE(seeding_allowed(c, 3100, 105));  // no reset from stop_split_at on
   c.distractors.seed_waits_after_reset = false;
   EXPECT_TRUE(seeding_allowed(c, 1100, 105));
   c.distractors.seed_after = 0;
@@ -338,7 +342,8 @@ TEST(TrainerRules, SeedingWaitsForSeedAfterAndOnePeriodAfterAnOpacityReset) {
     Trainer t(data, tc);
     int64_t seeded_at = -1;
     for (int i = 0; i < 400 && seeded_at < 0; ++i) {
-      if (i < 250) t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
+      if (i < 250)
+        t.mutable_distractors()[0] = TrainableGaussians(GaussianSet{{}, {}, {}, {}, {}, ColorMode::RGB, 0, {}, 0});
       if (t.step().reseeded > 0) seeded_at = i;
     }
     EXPECT_GT(seeded_at, 300) << "reset " << reset;
@@ -432,7 +437,8 @@ TEST(TrainerRules, StaticGaussiansBehindADistractorMaskAreNotCountedAsSeen) {
   // only when its centre is not behind view 0's distractors over the square.
   const TrainingData data = views_with_a_one_view_square();
   auto run = [&](bool hide) {
-    return train_without_static_refinement(data, [&](TrainConfig& c) { c.densify.stats.hide_behind_distractors = hide; });
+    return train_without_static_refinement(data,
+                                           [&](TrainConfig& c) { c.densify.stats.hide_behind_distractors = hide; });
   };
   const Trainer off = run(false), on = run(true);
   EXPECT_EQ(on.gaussians().params.means, off.gaussians().params.means);

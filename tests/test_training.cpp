@@ -119,8 +119,8 @@ TEST(Training, NonFiniteGaussianIsPrunedAndTrainingContinues) {
   trainer.warn = [&](const std::string& m) { warnings.push_back(m); };
   for (int i = 0; i < 5; ++i) trainer.step();
   const size_t before = trainer.gaussians().size();
-  trainer.mutable_gaussians().params.log_scales[3 * 7 + 1] = NAN;     // a parameter
-  trainer.mutable_gaussians().adam_v[0][3 * 11] = INFINITY;            // a moment
+  trainer.mutable_gaussians().params.log_scales[3 * 7 + 1] = NAN;  // a parameter
+  trainer.mutable_gaussians().adam_v[0][3 * 11] = INFINITY;        // a moment
   trainer.step();
   ASSERT_EQ(warnings.size(), 2u);
   const std::string all = warnings[0] + warnings[1];
@@ -174,7 +174,8 @@ TEST(Training, ResumeReproducesUninterruptedRunBitExactly) {
   Trainer straight(data, cfg);
   for (int i = 0; i < 260; ++i) straight.step();
 
-  const std::filesystem::path file = std::filesystem::temp_directory_path() / ("desplat_resume_test_" + std::to_string(::getpid()) + ".ckpt");
+  const std::filesystem::path file =
+      std::filesystem::temp_directory_path() / ("desplat_resume_test_" + std::to_string(::getpid()) + ".ckpt");
   {
     Trainer first(data, cfg);
     for (int i = 0; i < 155; ++i) first.step();  // past refinements at 150; mid-epoch
@@ -226,9 +227,13 @@ TEST(Training, CheckpointArrayNamesAreTheDocumentedOnes) {
   const Checkpoint c = make_training_checkpoint(trainer);
   std::set<std::string> names;
   for (const auto& [name, array] : c.arrays) names.insert(name);
-  std::set<std::string> want = {"trainer/view_order", "static/stats/absgrad_sum", "static/stats/visible_count",
-                                "static/stats/max_screen_radius", "trainer/view_static_unexplained",
-                                "trainer/view_composite_unexplained", "trainer/view_seed_due"};
+  std::set<std::string> want = {"trainer/view_order",
+                                "static/stats/absgrad_sum",
+                                "static/stats/visible_count",
+                                "static/stats/max_screen_radius",
+                                "trainer/view_static_unexplained",
+                                "trainer/view_composite_unexplained",
+                                "trainer/view_seed_due"};
   for (const char* group : {"means", "log_scales", "quats", "opacity_logits", "colors"})
     for (const std::string kind : {"", "adam_m/", "adam_v/"}) want.insert("static/" + kind + group);
   for (const std::string& n : want) EXPECT_TRUE(names.count(n)) << n;

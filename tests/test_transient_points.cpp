@@ -64,8 +64,7 @@ TEST(TransientPoints, ShortTracksAndDisagreeingColours) {
                   "does not match the points");
   TrainingData bad_view = d;
   bad_view.point_train_views[0] = {7};
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { transient_points(bad_view, {}); }),
-                  "does not exist");
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([&] { transient_points(bad_view, {}); }), "does not exist");
 }
 
 // Two photos of one grey wall taken two stops apart: 0.225 and 0.9 everywhere. Each of 40
@@ -109,8 +108,9 @@ TEST(TransientPoints, ColoursAreComparedAfterEachViewsExposure) {
   s.per_view_gain = false;
   EXPECT_EQ(transient_points(d, s), std::vector<uint8_t>(n, 1));
   s.per_view_gain = true;
-  EXPECT_EQ(config_from_json(nlohmann::json{{"init", {{"transient_per_view_gain", false}}}}).transient_points.per_view_gain,
-            false);
+  EXPECT_EQ(
+      config_from_json(nlohmann::json{{"init", {{"transient_per_view_gain", false}}}}).transient_points.per_view_gain,
+      false);
 
   // Fewer than 30 samples per channel: no evidence of a gain, the colour is compared as stored.
   TrainingData few = d;
@@ -128,14 +128,17 @@ TEST(TransientPoints, ConfigNamesTheActionAndRejectsOthers) {
   const nlohmann::json j = config_to_json(c);
   EXPECT_EQ(j["init"]["transient_points"], "seed");
   EXPECT_EQ(config_from_json(j).transient_points.action, TransientPointAction::seed);
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
-                      [] { config_from_json(nlohmann::json{{"init", {{"transient_points", "bury"}}}}); }),
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] {
+                    config_from_json(nlohmann::json{{"init", {{"transient_points", "bury"}}}});
+                  }),
                   "init.transient_points must be keep, drop or seed");
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
-                      [] { config_from_json(nlohmann::json{{"init", {{"transient_points", 2}}}}); }),
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] {
+                    config_from_json(nlohmann::json{{"init", {{"transient_points", 2}}}});
+                  }),
                   "init.transient_points must be a string");
-  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>(
-                      [] { config_from_json(nlohmann::json{{"init", {{"transient_min_track_images", -1}}}}); }),
+  EXPECT_CONTAINS(testing::error_of<std::invalid_argument>([] {
+                    config_from_json(nlohmann::json{{"init", {{"transient_min_track_images", -1}}}});
+                  }),
                   "init.transient_min_track_images");
 }
 
@@ -179,7 +182,8 @@ TEST(TransientPoints, DropLeavesThePointOutAndSeedMovesItIntoItsView) {
   ASSERT_TRUE(u0 >= 0 && v0 >= 0 && u0 < 64 && v0 < 48);
 
   std::map<TransientPointAction, std::pair<size_t, size_t>> sizes;  // static, view 0's distractors
-  for (const TransientPointAction a : {TransientPointAction::keep, TransientPointAction::drop, TransientPointAction::seed}) {
+  for (const TransientPointAction a :
+       {TransientPointAction::keep, TransientPointAction::drop, TransientPointAction::seed}) {
     TrainConfig c;
     c.transient_points.action = a;
     c.transient_points.color_tolerance = 1.0f;  // only the track length decides here

@@ -7,11 +7,11 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "desplat/train/transient_probe.hpp"
-#include "support/expect.hpp"
 #include "desplat/io/scene.hpp"
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/synth/synth.hpp"
+#include "desplat/train/transient_probe.hpp"
+#include "support/expect.hpp"
 
 namespace desplat::test {
 namespace {
@@ -144,8 +144,8 @@ TEST(TransientProbe, MapsThatDoNotMatchTheirCameraAreRejected) {
 }
 
 TEST(TransientProbe, TheProbeKeepsAtLeastMinProbeSidePixelsOnTheShortSide) {
-  EXPECT_EQ(probe_factor(500, 375), 4);   // 93 px
-  EXPECT_EQ(probe_factor(131, 235), 2);   // 65 px; at 4 it would be 32
+  EXPECT_EQ(probe_factor(500, 375), 4);  // 93 px
+  EXPECT_EQ(probe_factor(131, 235), 2);  // 65 px; at 4 it would be 32
   EXPECT_EQ(probe_factor(160, 120), 2);
   EXPECT_EQ(probe_factor(65, 117), 1);
   EXPECT_EQ(probe_factor(1920, 1080), 4);  // never beyond max_probe_factor
@@ -181,7 +181,8 @@ TEST(TransientProbe, FindsTheTransientsOfASyntheticCaptureAndNoneInItsCleanTwin)
   std::printf("cluttered: %s\nclean: %s\n", found[0].reason.c_str(), found[1].reason.c_str());
   EXPECT_TRUE(found[0].transients) << found[0].reason;
   EXPECT_FALSE(found[1].transients) << found[1].reason;
-  EXPECT_GT(found[0].views_with_transients, found[1].views_with_transients + 4) << found[0].reason << " / " << found[1].reason;
+  EXPECT_GT(found[0].views_with_transients, found[1].views_with_transients + 4)
+      << found[0].reason << " / " << found[1].reason;
 }
 
 }  // namespace

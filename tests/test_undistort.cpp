@@ -37,10 +37,10 @@ class ColmapUndistorter : public ::testing::Test {
     std::ofstream list(dir_ / "list.txt");
     for (const auto& name : kSubset) list << name << "\n";
     list.close();
-    const std::string cmd = "colmap image_undistorter --image_path " + (kFox / "images").string() +
-                            " --input_path " + (kFox / "sparse/0").string() + " --output_path " +
-                            (dir_ / "out").string() + " --output_type COLMAP --image_list_path " +
-                            (dir_ / "list.txt").string() + " > " + (dir_ / "colmap.log").string() + " 2>&1";
+    const std::string cmd = "colmap image_undistorter --image_path " + (kFox / "images").string() + " --input_path " +
+                            (kFox / "sparse/0").string() + " --output_path " + (dir_ / "out").string() +
+                            " --output_type COLMAP --image_list_path " + (dir_ / "list.txt").string() + " > " +
+                            (dir_ / "colmap.log").string() + " 2>&1";
     status_ = std::system(cmd.c_str());
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
@@ -225,7 +225,8 @@ TEST(Undistort, WarpsAnAnalyticPatternOntoThePinholeImage) {
     double max_err = 0;
     for (int y = 2; y < out.height - 2; ++y)
       for (int x = 2; x < out.width - 2; ++x) {
-        const Vec2 uv{(x + 0.5 - pinhole.params[2]) / pinhole.params[0], (y + 0.5 - pinhole.params[3]) / pinhole.params[1]};
+        const Vec2 uv{(x + 0.5 - pinhole.params[2]) / pinhole.params[0],
+                      (y + 0.5 - pinhole.params[3]) / pinhole.params[1]};
         max_err = std::max(max_err, double(std::abs(out.pixels[(size_t(y) * out.width + x) * 3] - pattern(uv))));
       }
     // Bilinear interpolation error of this pattern (≤ 0.01 per px² of curvature) plus

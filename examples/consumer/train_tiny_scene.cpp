@@ -78,8 +78,7 @@ int main(int argc, char** argv) {
       return std::accumulate(losses.begin() + from, losses.begin() + from + 10, 0.0) / 10;
     };
     const double first = mean_of_10(0), last = mean_of_10(losses.size() - 10);
-    if (!(last < first))
-      return fail("the loss did not fall: " + std::to_string(first) + " → " + std::to_string(last));
+    if (!(last < first)) return fail("the loss did not fall: " + std::to_string(first) + " → " + std::to_string(last));
     for (const char* file : {"config.json", "report.html"})
       if (!fs::is_regular_file(options.out_dir / file)) return fail(std::string(file) + " is missing");
     std::printf("trained %lld steps: %zu Gaussians, loss %.4f → %.4f, test PSNR %.2f dB\n",

@@ -12,10 +12,20 @@
 namespace desplat {
 namespace {
 
-template <typename T> MPI_Datatype mpi_type();
-template <> MPI_Datatype mpi_type<float>() { return MPI_FLOAT; }
-template <> MPI_Datatype mpi_type<double>() { return MPI_DOUBLE; }
-template <> MPI_Datatype mpi_type<int64_t>() { return MPI_INT64_T; }
+template <typename T>
+MPI_Datatype mpi_type();
+template <>
+MPI_Datatype mpi_type<float>() {
+  return MPI_FLOAT;
+}
+template <>
+MPI_Datatype mpi_type<double>() {
+  return MPI_DOUBLE;
+}
+template <>
+MPI_Datatype mpi_type<int64_t>() {
+  return MPI_INT64_T;
+}
 
 // Values per chunk of the ordered sum: rank 0 holds size() chunks at a time, so its extra
 // memory stays bounded whatever the array's length (and MPI counts stay within int).
@@ -41,7 +51,8 @@ class Mpi final : public Communicator {
   void sum(std::span<double> v) override { ordered_sum(v); }
   void sum(std::span<int64_t> v) override { ordered_sum(v); }
   void broadcast(std::span<std::byte> bytes, int root) override {
-    if (root < 0 || root >= size_) abort("broadcast from rank " + std::to_string(root) + " of " + std::to_string(size_));
+    if (root < 0 || root >= size_)
+      abort("broadcast from rank " + std::to_string(root) + " of " + std::to_string(size_));
     for (size_t at = 0; at < bytes.size(); at += size_t(INT_MAX)) {
       const int n = int(std::min(bytes.size() - at, size_t(INT_MAX)));
       check(MPI_Bcast(bytes.data() + at, n, MPI_BYTE, root, MPI_COMM_WORLD), "MPI_Bcast");
@@ -70,7 +81,8 @@ class Mpi final : public Communicator {
 
   // Chunk by chunk: gather every rank's values to rank 0, add them there in ascending rank
   // order, broadcast the sums.
-  template <typename T> void ordered_sum(std::span<T> values) {
+  template <typename T>
+  void ordered_sum(std::span<T> values) {
     if (size_ == 1) return;
     for (size_t at = 0; at < values.size(); at += kChunkValues) {
       const size_t n = std::min(values.size() - at, kChunkValues);

@@ -10,8 +10,7 @@ namespace desplat {
 
 std::array<float, 3> Camera::center() const {
   const auto& R = R_cw;
-  return {-(R[0] * t_cw[0] + R[3] * t_cw[1] + R[6] * t_cw[2]),
-          -(R[1] * t_cw[0] + R[4] * t_cw[1] + R[7] * t_cw[2]),
+  return {-(R[0] * t_cw[0] + R[3] * t_cw[1] + R[6] * t_cw[2]), -(R[1] * t_cw[0] + R[4] * t_cw[1] + R[7] * t_cw[2]),
           -(R[2] * t_cw[0] + R[5] * t_cw[1] + R[8] * t_cw[2])};
 }
 
@@ -32,7 +31,7 @@ long long Camera::pixel_of(const std::array<float, 3>& x) const {
   if (!(p[2] > 1e-6)) return -1;
   const double u = fx * p[0] / p[2] + cx, v = fy * p[1] / p[2] + cy;
   if (!(u >= 0 && v >= 0 && u < width && v < height)) return -1;
-  return (long long)(v) * width + (long long)(u);
+  return (long long)(v)*width + (long long)(u);
 }
 
 void Camera::validate() const {
@@ -53,12 +52,11 @@ void GaussianView::validate() const {
   auto expect = [n](size_t got, size_t per, const char* name) {
     if (got != n * per)
       throw std::invalid_argument(std::string("gaussians: ") + name + " has " + std::to_string(got) +
-                                  " values, expected " + std::to_string(n * per) + " for " +
-                                  std::to_string(n) + " Gaussians");
+                                  " values, expected " + std::to_string(n * per) + " for " + std::to_string(n) +
+                                  " Gaussians");
   };
   if (color_mode == ColorMode::SphericalHarmonics && (sh_degree < 0 || sh_degree > 3))
-    throw std::invalid_argument("gaussians: SH degree " + std::to_string(sh_degree) +
-                                " is not supported (0..3)");
+    throw std::invalid_argument("gaussians: SH degree " + std::to_string(sh_degree) + " is not supported (0..3)");
   expect(means.size(), 3, "means");
   expect(log_scales.size(), 3, "log_scales");
   expect(quats.size(), 4, "quats");

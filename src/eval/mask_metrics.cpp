@@ -26,7 +26,8 @@ MaskMetrics evaluate_distractor_masks(const Trainer& trainer, const Scene& scene
     if (!trainer.distractors().empty() && trainer.distractors()[v].size() > 0) {
       RasterOutput d;
       rasterize_forward(trainer.distractors()[v].params.view(), cam, trainer.raster_settings(), d);
-      for (size_t p = 0; p < d.alpha.size(); ++p) predicted.pixels[p] = d.alpha[p] > kDistractorMaskThreshold ? 1.0f : 0.0f;
+      for (size_t p = 0; p < d.alpha.size(); ++p)
+        predicted.pixels[p] = d.alpha[p] > kDistractorMaskThreshold ? 1.0f : 0.0f;
     }
     if (truth.width != predicted.width || truth.height != predicted.height)
       throw std::invalid_argument("distractor mask of view '" + train[v].name + "' is " + std::to_string(truth.width) +

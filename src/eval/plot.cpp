@@ -55,8 +55,10 @@ std::string script(const PlotSpec& spec, const std::vector<PlotSeries>& series, 
     s << "$D" << k << " << EOD\n";
     for (size_t i = 0; i < series[k].x.size(); ++i) {
       if (!std::isfinite(series[k].x[i]) || !std::isfinite(series[k].y[i])) continue;
-      if (spec.bars) s << quoted(spec.bar_labels[i]) << ' ' << series[k].y[i] << "\n";
-      else s << series[k].x[i] << ' ' << series[k].y[i] << "\n";
+      if (spec.bars)
+        s << quoted(spec.bar_labels[i]) << ' ' << series[k].y[i] << "\n";
+      else
+        s << series[k].x[i] << ' ' << series[k].y[i] << "\n";
     }
     s << "EOD\n";
   }
@@ -67,8 +69,8 @@ std::string script(const PlotSpec& spec, const std::vector<PlotSeries>& series, 
   }
   s << "plot ";
   for (size_t k = 0; k < series.size(); ++k)
-    s << (k ? ", " : "") << "$D" << k << " using 1:2 with "
-      << (series[k].x.size() < 12 ? "linespoints pt 7" : "lines") << " lw 2 title " << quoted(series[k].label);
+    s << (k ? ", " : "") << "$D" << k << " using 1:2 with " << (series[k].x.size() < 12 ? "linespoints pt 7" : "lines")
+      << " lw 2 title " << quoted(series[k].label);
   return s.str() + "\n";
 }
 
@@ -83,12 +85,13 @@ std::string draw_plot(const PlotSpec& spec, const std::vector<PlotSeries>& serie
   if (!gnuplot) throw PlotError("gnuplot is not installed (scripts/install_deps.sh installs gnuplot-nox)");
   std::error_code ec;
   fs::create_directories(scratch, ec);
-  const fs::path script_file = scratch / "plot.gp", output = scratch / (format == PlotFormat::Svg ? "plot.svg" : "plot.png");
+  const fs::path script_file = scratch / "plot.gp",
+                 output = scratch / (format == PlotFormat::Svg ? "plot.svg" : "plot.png");
   fs::remove(output, ec);
   write_file_atomically(script_file, script(spec, series, format, output));
   std::string printed;
-  const ProcessExit e =
-      run_subprocess({gnuplot->string(), script_file.string()}, [&](std::string_view c) { printed += c; }, 60);
+  const ProcessExit e = run_subprocess(
+      {gnuplot->string(), script_file.string()}, [&](std::string_view c) { printed += c; }, 60);
   std::ifstream in(output, std::ios::binary);
   std::ostringstream bytes;
   bytes << in.rdbuf();

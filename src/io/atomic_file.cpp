@@ -113,8 +113,7 @@ class TempFile {
 
   void commit() {
     if (::fsync(fd_) != 0) fail("fsync of temporary file " + tmp_.string() + " failed", errno);
-    if (::rename(tmp_.c_str(), target_.c_str()) != 0)
-      fail("rename of " + tmp_.string() + " over it failed", errno);
+    if (::rename(tmp_.c_str(), target_.c_str()) != 0) fail("rename of " + tmp_.string() + " over it failed", errno);
     committed_ = true;
     const int fd = std::exchange(fd_, -1);  // closing releases the lock, after the rename
     if (::close(fd) != 0) fail("was replaced, but closing it failed", errno);
@@ -132,7 +131,8 @@ class TempFile {
         fail("another writer is writing it (temporary file " + tmp_.string() + " is locked)", err);
       fail("cannot lock temporary file " + tmp_.string(), err);
     }
-    struct stat held {}, named {};
+    struct stat held {
+    }, named{};
     if (::fstat(fd_, &held) != 0) fail_closing("cannot stat temporary file " + tmp_.string());
     if (::stat(tmp_.c_str(), &named) != 0 || held.st_ino != named.st_ino || held.st_dev != named.st_dev) {
       close_quietly();
@@ -187,8 +187,7 @@ void stream_into(TempFile& file, const std::function<void(std::ostream&)>& write
     out.flush();
   } catch (...) {
     // The stream's own failure is only a symptom; report the errno behind it.
-    if (buf.error() != 0)
-      file.fail("write to temporary file " + file.tmp().string() + " failed", buf.error());
+    if (buf.error() != 0) file.fail("write to temporary file " + file.tmp().string() + " failed", buf.error());
     throw;
   }
   if (buf.error() != 0) file.fail("write to temporary file " + file.tmp().string() + " failed", buf.error());
@@ -204,9 +203,8 @@ void write_file_atomically(const fs::path& path, const std::function<void(std::o
 }
 
 void write_file_atomically(const fs::path& path, std::string_view bytes) {
-  write_file_atomically(path, [bytes](std::ostream& out) {
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  });
+  write_file_atomically(
+      path, [bytes](std::ostream& out) { out.write(bytes.data(), static_cast<std::streamsize>(bytes.size())); });
 }
 
 }  // namespace desplat

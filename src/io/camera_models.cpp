@@ -36,17 +36,14 @@ struct Pinhole {
 Vec2 radial_tangential(Vec2 w, double radial, double p1, double p2) {
   const double u = w[0], v = w[1];
   const double r2 = u * u + v * v;
-  return {u * radial + 2 * p1 * u * v + p2 * (r2 + 2 * u * u),
-          v * radial + 2 * p2 * u * v + p1 * (r2 + 2 * v * v)};
+  return {u * radial + 2 * p1 * u * v + p2 * (r2 + 2 * u * u), v * radial + 2 * p2 * u * v + p1 * (r2 + 2 * v * v)};
 }
 
 double radius2(Vec2 w) { return w[0] * w[0] + w[1] * w[1]; }
 
 struct SimpleRadial {
   static constexpr int kFocal = 1;
-  static Vec2 distortion(const double* k, Vec2 w) {
-    return radial_tangential(w, k[0] * radius2(w), 0, 0);
-  }
+  static Vec2 distortion(const double* k, Vec2 w) { return radial_tangential(w, k[0] * radius2(w), 0, 0); }
 };
 
 struct Radial {
@@ -193,8 +190,10 @@ Vec2 newton_undistort(const double* extra, Vec2 target) {
 
 template <class Model>
 PinholeIntrinsics intrinsics_of(const double* p) {
-  if constexpr (Model::kFocal == 1) return {p[0], p[0], p[1], p[2]};
-  else return {p[0], p[1], p[2], p[3]};
+  if constexpr (Model::kFocal == 1)
+    return {p[0], p[0], p[1], p[2]};
+  else
+    return {p[0], p[1], p[2], p[3]};
 }
 
 template <class Model>
@@ -213,8 +212,10 @@ Vec2 unproject(const double* params, Vec2 xy) {
   const double* extra = params + Model::kFocal + 2;
   const Vec2 distorted{(xy[0] - K.cx) / K.fx, (xy[1] - K.cy) / K.fy};
   Vec2 w;
-  if constexpr (requires { Model::inverse(extra, distorted); }) w = Model::inverse(extra, distorted);
-  else w = newton_undistort<Model>(extra, distorted);
+  if constexpr (requires { Model::inverse(extra, distorted); })
+    w = Model::inverse(extra, distorted);
+  else
+    w = newton_undistort<Model>(extra, distorted);
   if constexpr (requires { Model::unwarp(w); }) w = Model::unwarp(w);
   return w;
 }
@@ -245,9 +246,8 @@ const CameraModelMath& checked_math(const colmap::Camera& camera) {
   const int expected = colmap::camera_model_info(camera.model).num_params;
   if (camera.params.size() != static_cast<size_t>(expected))
     throw std::invalid_argument("camera " + std::to_string(camera.id) + ": " +
-                                colmap::camera_model_info(camera.model).name + " needs " +
-                                std::to_string(expected) + " params, got " +
-                                std::to_string(camera.params.size()));
+                                colmap::camera_model_info(camera.model).name + " needs " + std::to_string(expected) +
+                                " params, got " + std::to_string(camera.params.size()));
   return math;
 }
 

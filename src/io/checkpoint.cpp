@@ -49,8 +49,7 @@ constexpr CrcTables make_crc_tables() {
 constexpr CrcTables kCrcTables = make_crc_tables();
 
 std::uint32_t load_le32(const unsigned char* p) {
-  return std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 |
-         std::uint32_t{p[3]} << 24;
+  return std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 | std::uint32_t{p[3]} << 24;
 }
 
 }  // namespace
@@ -61,8 +60,8 @@ std::uint32_t crc32_update(std::uint32_t crc, const void* data, std::size_t n) {
   crc = ~crc;
   for (; n >= 8; p += 8, n -= 8) {
     const std::uint32_t lo = crc ^ load_le32(p), hi = load_le32(p + 4);
-    crc = t[7][lo & 0xff] ^ t[6][(lo >> 8) & 0xff] ^ t[5][(lo >> 16) & 0xff] ^ t[4][lo >> 24] ^
-          t[3][hi & 0xff] ^ t[2][(hi >> 8) & 0xff] ^ t[1][(hi >> 16) & 0xff] ^ t[0][hi >> 24];
+    crc = t[7][lo & 0xff] ^ t[6][(lo >> 8) & 0xff] ^ t[5][(lo >> 16) & 0xff] ^ t[4][lo >> 24] ^ t[3][hi & 0xff] ^
+          t[2][(hi >> 8) & 0xff] ^ t[1][(hi >> 16) & 0xff] ^ t[0][hi >> 24];
   }
   for (; n > 0; ++p, --n) crc = t[0][(crc ^ *p) & 0xff] ^ (crc >> 8);
   return ~crc;
@@ -85,9 +84,12 @@ std::string num(std::uint64_t v) { return std::to_string(v); }
 std::size_t element_bytes(ArrayType type) {
   switch (type) {
     case ArrayType::Float32:
-    case ArrayType::Int32: return 4;
-    case ArrayType::UInt8: return 1;
-    case ArrayType::UInt64: return 8;
+    case ArrayType::Int32:
+      return 4;
+    case ArrayType::UInt8:
+      return 1;
+    case ArrayType::UInt64:
+      return 8;
   }
   return 0;
 }
@@ -139,10 +141,14 @@ T get_le(const unsigned char* p) {
 
 const char* array_type_name(ArrayType type) {
   switch (type) {
-    case ArrayType::Float32: return "float32";
-    case ArrayType::Int32: return "int32";
-    case ArrayType::UInt8: return "uint8";
-    case ArrayType::UInt64: return "uint64";
+    case ArrayType::Float32:
+      return "float32";
+    case ArrayType::Int32:
+      return "int32";
+    case ArrayType::UInt8:
+      return "uint8";
+    case ArrayType::UInt64:
+      return "uint64";
   }
   return "unknown";
 }
@@ -155,9 +161,8 @@ bool is_valid_array_name(std::string_view name) {
 }
 
 ArrayType CheckpointArray::type() const {
-  return std::visit(
-      [](const auto& v) { return element_type_of<typename std::decay_t<decltype(v)>::value_type>(); },
-      values_);
+  return std::visit([](const auto& v) { return element_type_of<typename std::decay_t<decltype(v)>::value_type>(); },
+                    values_);
 }
 
 std::size_t CheckpointArray::size() const {
@@ -172,12 +177,11 @@ const void* CheckpointArray::data() const {
 
 void CheckpointArray::check_invariant() const {
   if (shape_.size() > kCheckpointMaxRank)
-    throw std::invalid_argument("checkpoint array rank " + num(shape_.size()) + " exceeds " +
-                                num(kCheckpointMaxRank));
+    throw std::invalid_argument("checkpoint array rank " + num(shape_.size()) + " exceeds " + num(kCheckpointMaxRank));
   const auto n = element_count(shape_);
   if (!n || *n != size())
-    throw std::invalid_argument("checkpoint array shape " + shape_text(shape_) + " does not match its " +
-                                num(size()) + " values");
+    throw std::invalid_argument("checkpoint array shape " + shape_text(shape_) + " does not match its " + num(size()) +
+                                " values");
 }
 
 void CheckpointArray::throw_type_mismatch(ArrayType wanted) const {
@@ -196,19 +200,16 @@ void Checkpoint::check_name(const std::string& name) {
                                 "' (need 1..255 printable ASCII characters, no spaces)");
 }
 
-const CheckpointArray& Checkpoint::array(std::string_view name) const {
-  return checked(name, ArrayType{}, nullptr);
-}
+const CheckpointArray& Checkpoint::array(std::string_view name) const { return checked(name, ArrayType{}, nullptr); }
 
 const CheckpointArray& Checkpoint::checked(std::string_view name, ArrayType type, const Shape* shape) const {
-  const std::string where = (source.empty() ? std::string("checkpoint") : source.string()) + ": array '" +
-                            std::string(name) + "'";
+  const std::string where =
+      (source.empty() ? std::string("checkpoint") : source.string()) + ": array '" + std::string(name) + "'";
   const auto it = arrays.find(name);
   if (it == arrays.end()) throw CheckpointError(where + " is missing");
   const CheckpointArray& a = it->second;
   if (type != ArrayType{} && a.type() != type)
-    throw CheckpointError(where + " holds " + array_type_name(a.type()) + ", expected " +
-                          array_type_name(type));
+    throw CheckpointError(where + " holds " + array_type_name(a.type()) + ", expected " + array_type_name(type));
   if (shape && a.shape() != *shape)
     throw CheckpointError(where + " has shape " + shape_text(a.shape()) + ", expected " + shape_text(*shape));
   return a;
@@ -226,8 +227,7 @@ namespace {
 // The metadata as JSON text, after checking that reading it back gives the same value:
 // nlohmann silently writes NaN/Inf as null, which would not restore what was saved.
 std::string metadata_text(const fs::path& path, const nlohmann::json& metadata) {
-  if (!metadata.is_object())
-    fail(path, std::string("metadata must be a JSON object, not ") + metadata.type_name());
+  if (!metadata.is_object()) fail(path, std::string("metadata must be a JSON object, not ") + metadata.type_name());
   std::string text;
   try {
     text = metadata.dump();
@@ -261,8 +261,8 @@ std::string file_header(std::uint32_t section_count) {
   return h;
 }
 
-void write_section(std::ostream& out, std::uint8_t type, const std::string& name,
-                   const CheckpointArray::Shape& dims, const void* payload, std::size_t payload_bytes) {
+void write_section(std::ostream& out, std::uint8_t type, const std::string& name, const CheckpointArray::Shape& dims,
+                   const void* payload, std::size_t payload_bytes) {
   std::string h;
   put_le<std::uint8_t>(h, type);
   put_le<std::uint8_t>(h, static_cast<std::uint8_t>(dims.size()));
@@ -290,8 +290,7 @@ void write_checkpoint(const fs::path& path, const Checkpoint& checkpoint) {
     write_bytes(out, header.data(), header.size());
     write_section(out, kMetadataType, kMetadataName, {meta.size()}, meta.data(), meta.size());
     for (const auto& [name, array] : checkpoint.arrays)
-      write_section(out, static_cast<std::uint8_t>(array.type()), name, array.shape(), array.data(),
-                    array.byte_size());
+      write_section(out, static_cast<std::uint8_t>(array.type()), name, array.shape(), array.data(), array.byte_size());
   };
   try {
     write_file_atomically(path, write_all);
@@ -332,8 +331,8 @@ class Reader {
 
   void read(void* dst, std::uint64_t n, const std::string& what) {
     if (n > remaining())
-      fail("truncated: " + what + " needs " + num(n) + " bytes at offset " + num(offset_) +
-           ", only " + num(remaining()) + " left");
+      fail("truncated: " + what + " needs " + num(n) + " bytes at offset " + num(offset_) + ", only " +
+           num(remaining()) + " left");
     if (n > 0 && !in_.read(static_cast<char*>(dst), static_cast<std::streamsize>(n)))
       fail("read error at offset " + num(offset_) + " (file changed while reading?)");
     offset_ += n;
@@ -355,11 +354,10 @@ class Reader {
 std::uint32_t read_file_header(Reader& r) {
   unsigned char h[kFileHeaderBytes];
   if (r.size() < kFileHeaderBytes)
-    r.fail("not a checkpoint: truncated: " + num(r.size()) + " bytes, shorter than the " +
-           num(kFileHeaderBytes) + "-byte file header");
+    r.fail("not a checkpoint: truncated: " + num(r.size()) + " bytes, shorter than the " + num(kFileHeaderBytes) +
+           "-byte file header");
   r.read(h, kFileHeaderBytes, "file header");
-  if (std::memcmp(h, kMagic.data(), kMagic.size()) != 0)
-    r.fail("not a desplat checkpoint (bad magic number)");
+  if (std::memcmp(h, kMagic.data(), kMagic.size()) != 0) r.fail("not a desplat checkpoint (bad magic number)");
   const auto version = get_le<std::uint32_t>(h + 8);
   if (version != kCheckpointFormatVersion)
     r.fail("unsupported checkpoint format version " + num(version) + " (this build reads version " +
@@ -372,8 +370,7 @@ std::uint32_t read_file_header(Reader& r) {
   if (count == 0) r.fail("no sections (the metadata section is required)");
   if (count > r.remaining() / kSectionMinBytes)
     r.fail("header declares " + num(count) + " sections, but the " + num(r.remaining()) +
-           " bytes after the header can hold at most " + num(r.remaining() / kSectionMinBytes) +
-           " (truncated?)");
+           " bytes after the header can hold at most " + num(r.remaining() / kSectionMinBytes) + " (truncated?)");
   return count;
 }
 
@@ -402,11 +399,9 @@ SectionHeader read_section_header(Reader& r, std::uint32_t index) {
   std::string rest(8 * rank + name_length, '\0');
   r.read(rest.data(), rest.size(), where + " header");
   const auto stored = r.read_le<std::uint32_t>(where + " header checksum");
-  const auto computed =
-      detail::crc32_update(detail::crc32_update(0, fixed, sizeof fixed), rest.data(), rest.size());
+  const auto computed = detail::crc32_update(detail::crc32_update(0, fixed, sizeof fixed), rest.data(), rest.size());
   if (stored != computed)
-    r.fail(where + ": header checksum mismatch (stored " + hex32(stored) + ", computed " + hex32(computed) +
-           ")");
+    r.fail(where + ": header checksum mismatch (stored " + hex32(stored) + ", computed " + hex32(computed) + ")");
   for (std::size_t d = 0; d < rank; ++d)
     h.dims.push_back(get_le<std::uint64_t>(reinterpret_cast<const unsigned char*>(rest.data()) + 8 * d));
   h.name = rest.substr(8 * rank);
@@ -426,8 +421,8 @@ void check_payload_size(Reader& r, const SectionHeader& h, std::size_t elem_byte
   // Before allocating: the payload and its checksum must be in the file.
   if (h.payload_bytes > r.remaining() || r.remaining() - h.payload_bytes < 4)
     r.fail("truncated: " + where + " declares " + num(h.payload_bytes) +
-           " payload bytes plus a 4-byte checksum at offset " + num(r.offset()) + ", only " +
-           num(r.remaining()) + " bytes left");
+           " payload bytes plus a 4-byte checksum at offset " + num(r.offset()) + ", only " + num(r.remaining()) +
+           " bytes left");
 }
 
 void read_payload(Reader& r, const SectionHeader& h, void* dst) {
@@ -441,8 +436,7 @@ void read_payload(Reader& r, const SectionHeader& h, void* dst) {
 
 nlohmann::json read_metadata(Reader& r, const SectionHeader& h) {
   if (h.type != kMetadataType || h.name != kMetadataName)
-    r.fail("the first section must be the metadata, found " + quoted(h.name) + " of type " +
-           num(h.type));
+    r.fail("the first section must be the metadata, found " + quoted(h.name) + " of type " + num(h.type));
   if (h.dims.size() != 1) r.fail("metadata section has rank " + num(h.dims.size()) + ", expected 1");
   check_payload_size(r, h, 1);
   std::string text(h.payload_bytes, '\0');
@@ -455,8 +449,7 @@ nlohmann::json read_metadata(Reader& r, const SectionHeader& h) {
   } catch (const nlohmann::json::exception& e) {
     r.fail(std::string("metadata is not valid JSON: ") + e.what());
   }
-  if (!meta.is_object())
-    r.fail(std::string("metadata is a JSON ") + meta.type_name() + ", expected an object");
+  if (!meta.is_object()) r.fail(std::string("metadata is a JSON ") + meta.type_name() + ", expected an object");
   return meta;
 }
 
@@ -470,10 +463,14 @@ CheckpointArray read_values(Reader& r, const SectionHeader& h) {
 
 CheckpointArray read_array(Reader& r, const SectionHeader& h) {
   switch (static_cast<ArrayType>(h.type)) {
-    case ArrayType::Float32: return read_values<float>(r, h);
-    case ArrayType::Int32: return read_values<std::int32_t>(r, h);
-    case ArrayType::UInt8: return read_values<std::uint8_t>(r, h);
-    case ArrayType::UInt64: return read_values<std::uint64_t>(r, h);
+    case ArrayType::Float32:
+      return read_values<float>(r, h);
+    case ArrayType::Int32:
+      return read_values<std::int32_t>(r, h);
+    case ArrayType::UInt8:
+      return read_values<std::uint8_t>(r, h);
+    case ArrayType::UInt64:
+      return read_values<std::uint64_t>(r, h);
   }
   r.fail("section " + quoted(h.name) + ": unknown element type " + num(h.type));
 }
@@ -494,9 +491,7 @@ Checkpoint read_checkpoint(const fs::path& path) {
     if (c.contains(h.name)) r.fail("duplicate array " + quoted(h.name));
     c.arrays.emplace(h.name, read_array(r, h));
   }
-  if (r.remaining() > 0)
-    r.fail(num(r.remaining()) + " trailing bytes after the last of " + num(count) +
-           " sections");
+  if (r.remaining() > 0) r.fail(num(r.remaining()) + " trailing bytes after the last of " + num(count) + " sections");
   c.source = path;
   return c;
 }

@@ -29,10 +29,10 @@ namespace {
 
 // Smallest encoded size of each record: counts are checked against the bytes left before
 // anything is allocated, so a corrupt count cannot trigger a huge allocation.
-constexpr size_t kCameraMinBytes = 4 + 4 + 8 + 8;               // params come on top
+constexpr size_t kCameraMinBytes = 4 + 4 + 8 + 8;                 // params come on top
 constexpr size_t kImageMinBytes = 4 + 4 * 8 + 3 * 8 + 4 + 1 + 8;  // empty name, no points
 constexpr size_t kObservationBytes = 8 + 8 + 8;
-constexpr size_t kPointMinBytes = 8 + 3 * 8 + 3 + 8 + 8;          // empty track
+constexpr size_t kPointMinBytes = 8 + 3 * 8 + 3 + 8 + 8;  // empty track
 constexpr size_t kTrackElementBytes = 4 + 4;
 constexpr uint64_t kInvalidPoint3DId = std::numeric_limits<uint64_t>::max();
 
@@ -49,8 +49,8 @@ class BinaryReader {
   template <class T>
   T get(const char* field) {
     if (remaining() < sizeof(T))
-      fail("truncated: " + std::string(field) + " needs " + num(sizeof(T)) + " bytes, only " +
-           num(remaining()) + " left");
+      fail("truncated: " + std::string(field) + " needs " + num(sizeof(T)) + " bytes, only " + num(remaining()) +
+           " left");
     T value;
     std::memcpy(&value, data_.data() + pos_, sizeof(T));
     pos_ += sizeof(T);
@@ -67,8 +67,10 @@ class BinaryReader {
     const char* start = data_.data() + pos_;
     const void* nul = std::memchr(start, '\0', remaining());
     if (!nul)
-      fail("truncated: " + std::string(field) + " has no terminating NUL byte before the end of "
-           "the file (" + num(remaining()) + " bytes left)");
+      fail("truncated: " + std::string(field) +
+           " has no terminating NUL byte before the end of "
+           "the file (" +
+           num(remaining()) + " bytes left)");
     std::string s(start, static_cast<const char*>(nul));
     pos_ += s.size() + 1;
     return s;
@@ -79,16 +81,17 @@ class BinaryReader {
     const size_t at = pos_;
     const auto count = get<uint64_t>(what);
     if (count > remaining() / min_bytes)
-      fail_at(at, "count of " + std::string(what) + " is " + num(count) + " but each needs at "
-              "least " + num(min_bytes) + " bytes and only " + num(remaining()) +
-              " bytes remain (corrupt or truncated file)");
+      fail_at(at, "count of " + std::string(what) + " is " + num(count) +
+                      " but each needs at "
+                      "least " +
+                      num(min_bytes) + " bytes and only " + num(remaining()) +
+                      " bytes remain (corrupt or truncated file)");
     return count;
   }
 
   void expect_end() {
     record_.clear();
-    if (remaining() != 0)
-      fail(num(remaining()) + " trailing bytes after the last record (expected end of file)");
+    if (remaining() != 0) fail(num(remaining()) + " trailing bytes after the last record (expected end of file)");
   }
 
   [[noreturn]] void fail(const std::string& problem) const { fail_at(pos_, problem); }
@@ -139,8 +142,7 @@ std::map<uint32_t, Camera> read_cameras_binary(const fs::path& path) {
     for (double& p : cam.params) p = in.get<double>("params");
     in.check_record(at, [&] { check_camera(cam); });
     const uint32_t id = cam.id;
-    if (!cameras.emplace(id, std::move(cam)).second)
-      in.fail_at(at, "duplicate camera id " + num(id));
+    if (!cameras.emplace(id, std::move(cam)).second) in.fail_at(at, "duplicate camera id " + num(id));
   }
   in.expect_end();
   return cameras;
@@ -180,8 +182,7 @@ std::map<uint32_t, Image> read_images_binary(const fs::path& path) {
     for (uint64_t k = 0; k < num_points; ++k) img.points2d[k] = read_observation(in, k);
     in.check_record(at, [&] { check_image(img); });
     const uint32_t id = img.id;
-    if (!images.emplace(id, std::move(img)).second)
-      in.fail_at(at, "duplicate image id " + num(id));
+    if (!images.emplace(id, std::move(img)).second) in.fail_at(at, "duplicate image id " + num(id));
   }
   in.expect_end();
   return images;
@@ -207,8 +208,7 @@ std::map<uint64_t, Point3D> read_points_binary(const fs::path& path) {
     }
     in.check_record(at, [&] { check_point(pt); });
     const uint64_t id = pt.id;
-    if (!points.emplace(id, std::move(pt)).second)
-      in.fail_at(at, "duplicate point3D id " + num(id));
+    if (!points.emplace(id, std::move(pt)).second) in.fail_at(at, "duplicate point3D id " + num(id));
   }
   in.expect_end();
   return points;
@@ -264,8 +264,7 @@ std::string encode_images(const std::map<uint32_t, Image>& images) {
     for (const Observation& obs : img.points2d) {
       w.put(obs.x);
       w.put(obs.y);
-      w.put<uint64_t>(obs.point3d_id == kNoPoint3D ? kInvalidPoint3DId
-                                                   : static_cast<uint64_t>(obs.point3d_id));
+      w.put<uint64_t>(obs.point3d_id == kNoPoint3D ? kInvalidPoint3DId : static_cast<uint64_t>(obs.point3d_id));
     }
   }
   return w.bytes();

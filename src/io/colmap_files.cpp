@@ -38,12 +38,10 @@ void make_directory(const fs::path& dir) {
 
 Model read_model(const fs::path& dir) {
   std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    throw ColmapError(dir.string() + ": COLMAP model directory not found");
+  if (!fs::is_directory(dir, ec)) throw ColmapError(dir.string() + ": COLMAP model directory not found");
   if (fs::exists(ModelPaths::binary(dir).cameras, ec)) return read_model_binary(dir);
   if (fs::exists(ModelPaths::text(dir).cameras, ec)) return read_model_text(dir);
-  throw ColmapError(dir.string() + ": no COLMAP model: neither " +
-                    ModelPaths::binary(dir).cameras.string() + " nor " +
+  throw ColmapError(dir.string() + ": no COLMAP model: neither " + ModelPaths::binary(dir).cameras.string() + " nor " +
                     ModelPaths::text(dir).cameras.string() + " exists");
 }
 

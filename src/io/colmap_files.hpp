@@ -24,9 +24,7 @@ inline std::string num(double v) {
 }
 
 template <class T>
-std::string num(T v)
-  requires std::is_integral_v<T>
-{
+std::string num(T v) requires std::is_integral_v<T> {
   return std::to_string(v);
 }
 

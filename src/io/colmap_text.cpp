@@ -99,8 +99,7 @@ class TextFile {
 // The fields of one line, with parsers that report the field name and offending text.
 class LineFields {
  public:
-  LineFields(const TextFile& file, size_t line)
-      : file_(file), line_(line), fields_(split_fields(file.line(line))) {}
+  LineFields(const TextFile& file, size_t line) : file_(file), line_(line), fields_(split_fields(file.line(line))) {}
 
   size_t size() const { return fields_.size(); }
   std::string_view raw(size_t k) const { return fields_[k]; }
@@ -135,9 +134,7 @@ class LineFields {
   // Image sizes: parsed signed so that "-5" is reported as non-positive, not as garbage.
   uint64_t positive(size_t k, std::string_view field, std::string_view who) const {
     const auto value = integer<int64_t>(k, field);
-    if (value <= 0)
-      fail(std::string(who) + std::string(field) + " must be positive, got " +
-           std::to_string(value));
+    if (value <= 0) fail(std::string(who) + std::string(field) + " must be positive, got " + std::to_string(value));
     return static_cast<uint64_t>(value);
   }
 
@@ -149,16 +146,13 @@ class LineFields {
   std::vector<std::string_view> fields_;
 };
 
-std::string indexed(std::string_view field, size_t k) {
-  return std::string(field) + "[" + std::to_string(k) + "]";
-}
+std::string indexed(std::string_view field, size_t k) { return std::string(field) + "[" + std::to_string(k) + "]"; }
 
 // ---- Reading ------------------------------------------------------------------------------
 
 Camera parse_camera(const LineFields& f) {
   if (f.size() < 4)
-    f.fail("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[], got " + std::to_string(f.size()) +
-           " fields");
+    f.fail("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[], got " + std::to_string(f.size()) + " fields");
   Camera cam;
   cam.id = f.integer<uint32_t>(0, "CAMERA_ID");
   const std::string who = "camera " + std::to_string(cam.id) + ": ";
@@ -178,16 +172,14 @@ std::map<uint32_t, Camera> read_cameras_text(const fs::path& path) {
     Camera cam = parse_camera(LineFields(file, i));
     file.check_line(i, [&] { check_camera(cam); });
     const uint32_t id = cam.id;
-    if (!cameras.emplace(id, std::move(cam)).second)
-      file.fail(i, "duplicate camera id " + std::to_string(id));
+    if (!cameras.emplace(id, std::move(cam)).second) file.fail(i, "duplicate camera id " + std::to_string(id));
   }
   return cameras;
 }
 
 Image parse_image_line(const LineFields& f) {
   if (f.size() < 10)
-    f.fail("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got " +
-           std::to_string(f.size()) + " fields");
+    f.fail("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got " + std::to_string(f.size()) + " fields");
   Image img;
   img.id = f.integer<uint32_t>(0, "IMAGE_ID");
   static constexpr const char* kQ[] = {"QW", "QX", "QY", "QZ"};
@@ -201,8 +193,7 @@ Image parse_image_line(const LineFields& f) {
 
 std::vector<Observation> parse_points2d_line(const LineFields& f) {
   if (f.size() % 3 != 0)
-    f.fail("POINTS2D line has " + std::to_string(f.size()) +
-           " fields, not a multiple of 3 (X Y POINT3D_ID)");
+    f.fail("POINTS2D line has " + std::to_string(f.size()) + " fields, not a multiple of 3 (X Y POINT3D_ID)");
   std::vector<Observation> points(f.size() / 3);
   for (size_t k = 0; k < points.size(); ++k) {
     points[k].x = f.real(3 * k, indexed("X", k));
@@ -225,16 +216,17 @@ std::map<uint32_t, Image> read_images_text(const fs::path& path) {
     img.points2d = parse_points2d_line(LineFields(file, i + 1));
     file.check_line(i, [&] { check_image(img); });
     const uint32_t id = img.id;
-    if (!images.emplace(id, std::move(img)).second)
-      file.fail(i, "duplicate image id " + std::to_string(id));
+    if (!images.emplace(id, std::move(img)).second) file.fail(i, "duplicate image id " + std::to_string(id));
   }
   return images;
 }
 
 Point3D parse_point(const LineFields& f) {
   if (f.size() < 8 || (f.size() - 8) % 2 != 0)
-    f.fail("expected POINT3D_ID X Y Z R G B ERROR followed by (IMAGE_ID POINT2D_IDX) pairs, "
-           "got " + std::to_string(f.size()) + " fields");
+    f.fail(
+        "expected POINT3D_ID X Y Z R G B ERROR followed by (IMAGE_ID POINT2D_IDX) pairs, "
+        "got " +
+        std::to_string(f.size()) + " fields");
   Point3D pt;
   pt.id = f.integer<uint64_t>(0, "POINT3D_ID");
   static constexpr const char* kXYZ[] = {"X", "Y", "Z"};
@@ -261,8 +253,7 @@ std::map<uint64_t, Point3D> read_points_text(const fs::path& path) {
     Point3D pt = parse_point(LineFields(file, i));
     file.check_line(i, [&] { check_point(pt); });
     const uint64_t id = pt.id;
-    if (!points.emplace(id, std::move(pt)).second)
-      file.fail(i, "duplicate point3D id " + std::to_string(id));
+    if (!points.emplace(id, std::move(pt)).second) file.fail(i, "duplicate point3D id " + std::to_string(id));
   }
   return points;
 }
@@ -283,9 +274,7 @@ std::string format_double(double v) {
 class LineWriter {
  public:
   template <class T>
-  LineWriter& operator<<(T value)
-    requires std::is_arithmetic_v<T>
-  {
+  LineWriter& operator<<(T value) requires std::is_arithmetic_v<T> {
     space();
     char buf[32];
     if constexpr (std::is_floating_point_v<T>)
@@ -363,8 +352,7 @@ std::string encode_points(const std::map<uint64_t, Point3D>& points) {
   LineWriter w;
   w.comment("# 3D point list with one line of data per point:");
   w.comment("#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)");
-  w.comment("# Number of points: " + std::to_string(points.size()) +
-            ", mean track length: " + format_double(mean));
+  w.comment("# Number of points: " + std::to_string(points.size()) + ", mean track length: " + format_double(mean));
   for (const auto& [id, pt] : points) {
     w << pt.id;
     for (double c : pt.xyz) w << c;
@@ -381,8 +369,8 @@ void check_names_writable(const Model& model, const fs::path& images_file) {
   for (const auto& [id, img] : model.images) {
     const bool breaks = img.name.find_first_of("\n\r") != std::string::npos;
     if (breaks || trim(img.name) != img.name)
-      throw ColmapError(images_file.string() + ": image " + std::to_string(id) + ": name '" +
-                        img.name + "' has a line break or leading/trailing blanks, which the "
+      throw ColmapError(images_file.string() + ": image " + std::to_string(id) + ": name '" + img.name +
+                        "' has a line break or leading/trailing blanks, which the "
                         "text format cannot store");
   }
 }

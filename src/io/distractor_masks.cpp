@@ -18,7 +18,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-
 // The first channel of any image file, scaled to [0, 1] by its format's full range.
 // Values as stored (unassociated_alpha).
 FloatImage read_first_channel(const fs::path& path, const std::string& kind) {

@@ -23,8 +23,7 @@ void write_encoded_image(const std::filesystem::path& path, const OIIO::ImageSpe
     throw ImageError(fail + "the " + out->format_name() + " format cannot be written in memory; use .png or .jpg");
   std::vector<unsigned char> bytes;
   OIIO::Filesystem::IOVecOutput memory(bytes);
-  if (!out->set_ioproxy(&memory) || !out->open(path.string(), spec) || !out->write_image(type, pixels) ||
-      !out->close())
+  if (!out->set_ioproxy(&memory) || !out->open(path.string(), spec) || !out->write_image(type, pixels) || !out->close())
     throw ImageError(fail + out->geterror());
   if (bytes.empty()) throw ImageError(fail + "the encoder produced no bytes");
   try {

@@ -20,7 +20,7 @@ bool jpeg_reaches_end_marker(const std::filesystem::path& path) {
     while (i < b.size() && b[i] == 0xFF) ++i;  // FF may repeat as padding
     if (i >= b.size()) return false;
     const unsigned char marker = b[i++];
-    if (marker == 0xD9) return false;          // an end marker before any scan: no image
+    if (marker == 0xD9) return false;                                    // an end marker before any scan: no image
     if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) continue;  // no length
     if (i + 2 > b.size()) return false;
     const size_t length = size_t(b[i]) << 8 | b[i + 1];

@@ -13,12 +13,12 @@ nlohmann::json parse_with_bound(Input&& input, const std::string& source, bool i
   // `depth` is that of the enclosing value: an array or object opened at depth d is level d + 1.
   const nlohmann::json::parser_callback_t bound = [&source](int depth, nlohmann::json::parse_event_t event,
                                                             nlohmann::json&) {
-    const bool opens = event == nlohmann::json::parse_event_t::object_start ||
-                       event == nlohmann::json::parse_event_t::array_start;
+    const bool opens =
+        event == nlohmann::json::parse_event_t::object_start || event == nlohmann::json::parse_event_t::array_start;
     if (opens && depth >= kMaxJsonDepth)
       throw JsonTextError(source + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
-                        " levels (arrays or objects inside one another); desplat's files nest a few levels, so "
-                        "this is not one of them: check the file or text given");
+                          " levels (arrays or objects inside one another); desplat's files nest a few levels, so "
+                          "this is not one of them: check the file or text given");
     return true;
   };
   try {

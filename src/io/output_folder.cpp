@@ -31,8 +31,7 @@ bool within(const fs::path& inner, const fs::path& outer) {
 }  // namespace
 
 void check_output_folder(const std::string& out_option, const fs::path& out, const std::vector<ReadLocation>& inputs) {
-  if (out.empty())
-    throw std::invalid_argument(out_option + " is empty: give the folder to write the outputs into");
+  if (out.empty()) throw std::invalid_argument(out_option + " is empty: give the folder to write the outputs into");
   std::error_code ec;
   if (fs::exists(out, ec) && !fs::is_directory(out, ec))
     throw std::invalid_argument(out_option + " " + out.string() +
@@ -52,8 +51,7 @@ void check_output_folder(const std::string& out_option, const fs::path& out, con
       throw std::invalid_argument(out_option + " " + out.string() + " lies inside " + in.option + " " +
                                   in.path.string() + ": the input is never written; choose a folder outside it");
     if (within(i, o))
-      throw std::invalid_argument(out_option + " " + out.string() + " contains " + in.option + " " +
-                                  in.path.string() +
+      throw std::invalid_argument(out_option + " " + out.string() + " contains " + in.option + " " + in.path.string() +
                                   ": the outputs would be written among the inputs; choose a folder that does not "
                                   "hold them");
   }

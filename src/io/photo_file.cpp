@@ -28,8 +28,9 @@ PhotoFile read_photo_file(const std::filesystem::path& path) {
   // A truncated JPEG decodes "successfully" with grey rows: an editing tool would write the
   // grey back as a valid photo.
   if (p.format == "jpeg" && !jpeg_reaches_end_marker(path))
-    throw ImageError(path.string() + ": the JPEG is truncated or damaged: its data ends before the end-of-image "
-                                     "marker (a decoder would fill the missing part with grey)");
+    throw ImageError(path.string() +
+                     ": the JPEG is truncated or damaged: its data ends before the end-of-image "
+                     "marker (a decoder would fill the missing part with grey)");
   return p;
 }
 

@@ -35,9 +35,7 @@ constexpr std::size_t kMaxHeaderBytes = std::size_t{1} << 20;
 constexpr std::size_t kChunkBytes = std::size_t{4} << 20;  // I/O buffer size
 constexpr const char* kSupportedFormat = "binary_little_endian 1.0";
 
-[[noreturn]] void fail(const fs::path& path, const std::string& what) {
-  throw PlyError(path.string() + ": " + what);
-}
+[[noreturn]] void fail(const fs::path& path, const std::string& what) { throw PlyError(path.string() + ": " + what); }
 
 // ---------------------------------------------------------------------------
 // Column table shared by writer and reader.
@@ -53,11 +51,16 @@ struct Column {
 int stride_of(Field field, int sh_degree) {
   switch (field) {
     case Field::Mean:
-    case Field::LogScale: return 3;
-    case Field::Quat: return 4;
-    case Field::Opacity: return 1;
-    case Field::Color: return 3 * sh_coeff_count(sh_degree);
-    case Field::Normal: return 0;
+    case Field::LogScale:
+      return 3;
+    case Field::Quat:
+      return 4;
+    case Field::Opacity:
+      return 1;
+    case Field::Color:
+      return 3 * sh_coeff_count(sh_degree);
+    case Field::Normal:
+      return 0;
   }
   return 0;
 }
@@ -83,12 +86,18 @@ std::vector<Column> standard_columns(int sh_degree) {
 
 const std::vector<float>* array_of(const GaussianSet& g, Field field) {
   switch (field) {
-    case Field::Mean: return &g.means;
-    case Field::LogScale: return &g.log_scales;
-    case Field::Quat: return &g.quats;
-    case Field::Opacity: return &g.opacity_logits;
-    case Field::Color: return &g.colors;
-    case Field::Normal: return nullptr;
+    case Field::Mean:
+      return &g.means;
+    case Field::LogScale:
+      return &g.log_scales;
+    case Field::Quat:
+      return &g.quats;
+    case Field::Opacity:
+      return &g.opacity_logits;
+    case Field::Color:
+      return &g.colors;
+    case Field::Normal:
+      return nullptr;
   }
   return nullptr;
 }
@@ -100,8 +109,8 @@ std::vector<float>* array_of(GaussianSet& g, Field field) {
 
 // Little-endian float (de)serialization independent of the host byte order.
 float load_le_float(const unsigned char* p) {
-  const std::uint32_t u = std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 |
-                          std::uint32_t{p[2]} << 16 | std::uint32_t{p[3]} << 24;
+  const std::uint32_t u =
+      std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 | std::uint32_t{p[3]} << 24;
   return std::bit_cast<float>(u);
 }
 
@@ -120,16 +129,16 @@ std::string describe_nonfinite(float v) {
 
 void check_exportable(const fs::path& path, const GaussianSet& g, const WorldNormalization& norm) {
   if (g.color_mode == ColorMode::RGB)
-    fail(path, "cannot export RGB-mode Gaussians (distractors) as a 3DGS PLY; "
-               "the format stores spherical-harmonics color only");
+    fail(path,
+         "cannot export RGB-mode Gaussians (distractors) as a 3DGS PLY; "
+         "the format stores spherical-harmonics color only");
   try {
     g.view().validate();
   } catch (const std::invalid_argument& e) {
     fail(path, std::string("cannot export inconsistent Gaussians: ") + e.what());
   }
   if (!(norm.scale > 0) || !std::isfinite(norm.scale))
-    fail(path, "world normalization scale must be positive and finite (got " +
-                   std::to_string(norm.scale) + ")");
+    fail(path, "world normalization scale must be positive and finite (got " + std::to_string(norm.scale) + ")");
   for (double c : norm.center)
     if (!std::isfinite(c)) fail(path, "world normalization center is not finite");
 }
@@ -168,22 +177,20 @@ std::vector<Source> sources_of(const GaussianSet& g, const std::vector<Column>& 
   std::vector<Source> sources;
   for (const Column& c : cols) {
     const std::vector<float>* array = array_of(g, c.field);
-    sources.push_back({&c, array ? array->data() : nullptr,
-                       static_cast<std::size_t>(stride_of(c.field, g.sh_degree))});
+    sources.push_back({&c, array ? array->data() : nullptr, static_cast<std::size_t>(stride_of(c.field, g.sh_degree))});
   }
   return sources;
 }
 
 std::string header_text(std::size_t n, const std::vector<Column>& cols) {
-  std::string h = "ply\nformat " + std::string(kSupportedFormat) + "\nelement vertex " +
-                  std::to_string(n) + "\n";
+  std::string h = "ply\nformat " + std::string(kSupportedFormat) + "\nelement vertex " + std::to_string(n) + "\n";
   for (const Column& c : cols) h += "property float " + c.name + "\n";
   return h + "end_header\n";
 }
 
 // Encodes Gaussians [first, first + count) as packed little-endian records into `out`.
-void encode_records(const fs::path& path, const std::vector<Source>& sources, std::size_t first,
-                    std::size_t count, const ToOriginal& convert, unsigned char* out) {
+void encode_records(const fs::path& path, const std::vector<Source>& sources, std::size_t first, std::size_t count,
+                    const ToOriginal& convert, unsigned char* out) {
   for (std::size_t i = first; i < first + count; ++i) {
     for (const Source& s : sources) {
       float v = 0;  // normals
@@ -386,8 +393,7 @@ void check_property_types(const fs::path& path, const Element& vertex) {
   for (const Property& p : vertex.properties) {
     if (p.is_list) fail(path, "vertex property '" + p.name + "' is a list; only float properties are supported");
     if (p.type != "float" && p.type != "float32")
-      fail(path, "vertex property '" + p.name + "' has type '" + p.type +
-                     "'; only float (float32) is supported");
+      fail(path, "vertex property '" + p.name + "' has type '" + p.type + "'; only float (float32) is supported");
     if (!seen.insert(p.name).second) fail(path, "duplicate vertex property '" + p.name + "'");
   }
 }
@@ -408,8 +414,7 @@ struct Target {
   std::string name;
 };
 
-std::vector<Target> map_properties(const fs::path& path, const Element& vertex,
-                                   const std::vector<Column>& cols) {
+std::vector<Target> map_properties(const fs::path& path, const Element& vertex, const std::vector<Column>& cols) {
   std::set<std::string> present;
   for (const Property& p : vertex.properties) present.insert(p.name);
   for (const Column& c : cols)
@@ -419,8 +424,7 @@ std::vector<Target> map_properties(const fs::path& path, const Element& vertex,
   std::vector<Target> targets;
   for (const Property& p : vertex.properties) {
     const auto it = std::find_if(cols.begin(), cols.end(), [&](const Column& c) { return c.name == p.name; });
-    if (it == cols.end())
-      fail(path, "unknown vertex property '" + p.name + "' (refusing to drop its data)");
+    if (it == cols.end()) fail(path, "unknown vertex property '" + p.name + "' (refusing to drop its data)");
     targets.push_back({it->field == Field::Normal ? nullptr : &*it, p.name});
   }
   return targets;
@@ -429,16 +433,15 @@ std::vector<Target> map_properties(const fs::path& path, const Element& vertex,
 // Checks the body holds exactly n records, before anything is allocated for them.
 void check_body_size(const fs::path& path, std::uint64_t n, std::uint64_t record, std::uint64_t body) {
   if (n > body / record)
-    fail(path, "truncated: the header declares " + std::to_string(n) + " vertices of " +
-                   std::to_string(record) + " bytes but only " + std::to_string(body) +
-                   " bytes follow the header (room for " + std::to_string(body / record) + ")");
+    fail(path, "truncated: the header declares " + std::to_string(n) + " vertices of " + std::to_string(record) +
+                   " bytes but only " + std::to_string(body) + " bytes follow the header (room for " +
+                   std::to_string(body / record) + ")");
   if (body > n * record)
     fail(path, std::to_string(body - n * record) + " trailing bytes after the last of " + std::to_string(n) +
                    " vertex records");
 }
 
-void decode_records(const fs::path& path, std::istream& in, const std::vector<Target>& targets,
-                    GaussianSet& g) {
+void decode_records(const fs::path& path, std::istream& in, const std::vector<Target>& targets, GaussianSet& g) {
   // Resolve each property to its destination once: Gaussian i goes to base[i * stride + offset].
   struct Sink {
     float* base;  // null: read and ignored (normals)
@@ -469,8 +472,7 @@ void decode_records(const fs::path& path, std::istream& in, const std::vector<Ta
         if (!s.base) continue;
         const float v = load_le_float(rec);
         if (!std::isfinite(v))
-          fail(path, "vertex " + std::to_string(i) + " property '" + targets[p].name + "' is " +
-                         describe_nonfinite(v));
+          fail(path, "vertex " + std::to_string(i) + " property '" + targets[p].name + "' is " + describe_nonfinite(v));
         s.base[i * s.stride + s.offset] = v;
       }
     }

@@ -12,8 +12,8 @@
 #include <cstdlib>
 #include <iostream>
 #include <map>
-#include <set>
 #include <optional>
+#include <set>
 
 #include "desplat/io/camera_models.hpp"
 #include "desplat/io/masks.hpp"
@@ -21,8 +21,10 @@
 namespace desplat {
 
 void report_warning(const WarningSink& sink, const std::string& message) {
-  if (sink) sink(message);
-  else std::cerr << "desplat: warning: " << message << "\n";
+  if (sink)
+    sink(message);
+  else
+    std::cerr << "desplat: warning: " << message << "\n";
 }
 
 namespace {
@@ -96,7 +98,8 @@ WorldNormalization normalization_of(const colmap::Model& model) {
   for (const auto& [id, image] : model.images) mean += center_of(image);
   mean /= static_cast<double>(model.images.size());
   double extent = 0;
-  for (const auto& [id, image] : model.images) extent = std::max(extent, (center_of(image) - mean).cwiseAbs().maxCoeff());
+  for (const auto& [id, image] : model.images)
+    extent = std::max(extent, (center_of(image) - mean).cwiseAbs().maxCoeff());
   WorldNormalization n;
   n.center = {mean.x(), mean.y(), mean.z()};
   n.scale = extent > 0 ? 1.0 / extent : 1.0;  // one camera (or coincident ones): keep the scale
@@ -146,9 +149,8 @@ void check_poses(const colmap::Model& model, const WorldNormalization& n, const 
   for (const auto& [pid, point] : model.points)
     for (int k = 0; k < 3; ++k) point_extent = std::max(point_extent, std::abs(point.xyz[k] - point_mean[k]));
   if (model.points.size() >= 2 && n.scale != 1.0 && point_extent * n.scale < 1e-9)
-    throw SceneError(model_images_file(sparse).string() + ": the cameras spread over " +
-                     std::to_string(1.0 / n.scale) + " units but the sparse points only over " +
-                     std::to_string(point_extent) +
+    throw SceneError(model_images_file(sparse).string() + ": the cameras spread over " + std::to_string(1.0 / n.scale) +
+                     " units but the sparse points only over " + std::to_string(point_extent) +
                      ": the camera positions and the points are not in the same units (run desplat_sfm on the photos)");
   size_t seen = 0;
   for (const auto& [id, image] : model.images) {
@@ -263,8 +265,8 @@ uint64_t fnv1a(const std::string& s) {
 
 std::string camera_key(const colmap::Camera& c) {
   char buf[64];
-  std::string s = std::to_string(static_cast<int>(c.model)) + " " + std::to_string(c.width) + " " +
-                  std::to_string(c.height);
+  std::string s =
+      std::to_string(static_cast<int>(c.model)) + " " + std::to_string(c.width) + " " + std::to_string(c.height);
   for (double p : c.params) {
     std::snprintf(buf, sizeof buf, " %.17g", p);
     s += buf;
@@ -273,7 +275,8 @@ std::string camera_key(const colmap::Camera& c) {
 }
 
 bool needs_processing(const SceneView& v) {
-  return uint64_t(v.source_width) != v.distorted_camera.width || uint64_t(v.source_height) != v.distorted_camera.height ||
+  return uint64_t(v.source_width) != v.distorted_camera.width ||
+         uint64_t(v.source_height) != v.distorted_camera.height ||
          camera_model_math(v.distorted_camera.model).has_distortion;
 }
 
@@ -435,7 +438,8 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
   require_dir(data / "images", "images/");
   const fs::path sparse = require_dir(data / "sparse" / "0", "sparse/0/");
   const colmap::Model model = read_model_or_throw(sparse);
-  if (model.images.empty()) throw SceneError(model_images_file(sparse).string() + ": the model has no registered images");
+  if (model.images.empty())
+    throw SceneError(model_images_file(sparse).string() + ": the model has no registered images");
 
   Scene scene;
   scene.data_dir = data;
@@ -501,7 +505,8 @@ Scene load_colmap_scene(const fs::path& data_dir, const SceneOptions& options) {
     if (double(v.undistorted_camera.width) <= options.undistort.min_scale * double(w) + 1 ||
         double(v.undistorted_camera.height) <= options.undistort.min_scale * double(h) + 1)
       throw SceneError(model_cameras_file(sparse).string() + ": camera " + std::to_string(lens.id) + " (" +
-                       colmap::camera_model_info(lens.model).name + "): its distortion coefficients bend the image "
+                       colmap::camera_model_info(lens.model).name +
+                       "): its distortion coefficients bend the image "
                        "border so far that undistorting keeps at most " +
                        std::to_string(int(100 * options.undistort.min_scale)) +
                        "% of each side; they are not a real lens's: check the camera's parameters (" +
@@ -546,7 +551,8 @@ FloatImage load_view_image(const Scene& scene, size_t view) {
     }
   }
   fs::create_directories(cached.parent_path(), ec);
-  if (ec) throw SceneError("cannot create the image cache folder " + cached.parent_path().string() + ": " + ec.message());
+  if (ec)
+    throw SceneError("cannot create the image cache folder " + cached.parent_path().string() + ": " + ec.message());
   write_atomically(cached, process(v));
   return read_checked(cached, w, h);  // what every later load returns, bit for bit
 }

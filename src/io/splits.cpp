@@ -178,12 +178,18 @@ std::vector<ViewRole> phototourism(const std::vector<std::string>& names, const 
 
 const char* split_rule_name(SplitRule rule) {
   switch (rule) {
-    case SplitRule::EveryNth: return "every-nth";
-    case SplitRule::AllTrain: return "all-train";
-    case SplitRule::NameLists: return "lists";
-    case SplitRule::RobustNeRF: return "robustnerf";
-    case SplitRule::OnTheGo: return "onthego";
-    case SplitRule::PhotoTourism: return "phototourism";
+    case SplitRule::EveryNth:
+      return "every-nth";
+    case SplitRule::AllTrain:
+      return "all-train";
+    case SplitRule::NameLists:
+      return "lists";
+    case SplitRule::RobustNeRF:
+      return "robustnerf";
+    case SplitRule::OnTheGo:
+      return "onthego";
+    case SplitRule::PhotoTourism:
+      return "phototourism";
   }
   return "?";
 }
@@ -223,12 +229,24 @@ std::vector<ViewRole> assign_split(const std::vector<std::string>& names, const 
   check_options(options);
   std::vector<ViewRole> roles;
   switch (options.rule) {
-    case SplitRule::EveryNth: roles = every_nth(names, options.every_nth); break;
-    case SplitRule::AllTrain: roles.assign(names.size(), ViewRole::Train); break;
-    case SplitRule::NameLists: roles = name_lists(names, options); break;
-    case SplitRule::RobustNeRF: roles = robustnerf(names, options.clutter_ratio); break;
-    case SplitRule::OnTheGo: roles = onthego(names); break;
-    case SplitRule::PhotoTourism: roles = phototourism(names, options.tsv); break;
+    case SplitRule::EveryNth:
+      roles = every_nth(names, options.every_nth);
+      break;
+    case SplitRule::AllTrain:
+      roles.assign(names.size(), ViewRole::Train);
+      break;
+    case SplitRule::NameLists:
+      roles = name_lists(names, options);
+      break;
+    case SplitRule::RobustNeRF:
+      roles = robustnerf(names, options.clutter_ratio);
+      break;
+    case SplitRule::OnTheGo:
+      roles = onthego(names);
+      break;
+    case SplitRule::PhotoTourism:
+      roles = phototourism(names, options.tsv);
+      break;
   }
   const auto train = std::count(roles.begin(), roles.end(), ViewRole::Train);
   if (train == 0)

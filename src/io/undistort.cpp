@@ -94,8 +94,8 @@ FloatImage from_mat(const cv::Mat& m) {
 colmap::Camera undistort_camera(const colmap::Camera& distorted, const UndistortOptions& options) {
   check_options(options);
   const PinholeIntrinsics K = pinhole_intrinsics(distorted);
-  colmap::Camera out{distorted.id, colmap::CameraModelId::Pinhole, distorted.width, distorted.height,
-                     {K.fx, K.fy, K.cx, K.cy}};
+  colmap::Camera out{
+      distorted.id, colmap::CameraModelId::Pinhole, distorted.width, distorted.height, {K.fx, K.fy, K.cx, K.cy}};
   if (!camera_model_math(distorted.model).has_distortion) return out;
 
   const BorderRanges r = border_ranges(distorted, K);
@@ -120,8 +120,8 @@ FloatImage undistort_image(const FloatImage& image, const colmap::Camera& distor
     throw std::invalid_argument("undistort_image: image is " + std::to_string(image.width) + "x" +
                                 std::to_string(image.height) + " px but camera " + std::to_string(distorted.id) +
                                 " is " + std::to_string(distorted.width) + "x" + std::to_string(distorted.height));
-  if (undistorted.model != colmap::CameraModelId::Pinhole || undistorted.params.size() != 4 ||
-      undistorted.width == 0 || undistorted.height == 0)
+  if (undistorted.model != colmap::CameraModelId::Pinhole || undistorted.params.size() != 4 || undistorted.width == 0 ||
+      undistorted.height == 0)
     throw std::invalid_argument("undistort_image: the target camera must be a PINHOLE camera with a size");
   const PinholeIntrinsics K = pinhole_intrinsics(undistorted);
   const PinholeIntrinsics K_src = pinhole_intrinsics(distorted);

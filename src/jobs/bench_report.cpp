@@ -33,13 +33,18 @@ ReportResult write_bench_report(const fs::path& out_dir, const std::vector<Bench
       }
       psnr.push_back(p), iou.push_back(m);
     }
-    body += plot_frame(plotter.svg(line_plot(scene + ": test PSNR against training time", "training wall time [s]",
-                                             "test PSNR [dB]"), psnr), scene + " psnr");
+    body += plot_frame(
+        plotter.svg(line_plot(scene + ": test PSNR against training time", "training wall time [s]", "test PSNR [dB]"),
+                    psnr),
+        scene + " psnr");
     body += plot_frame(plotter.svg(line_plot(scene + ": distractor mask IoU against training time",
-                                             "training wall time [s]", "mask IoU"), iou), scene + " iou");
+                                             "training wall time [s]", "mask IoU"),
+                                   iou),
+                       scene + " iou");
   }
-  body += "<h2>Final point of every run</h2>\n<table><tr><th>scene</th><th>run</th><th>steps</th><th>training "
-          "time</th><th>test PSNR</th><th>SSIM</th><th>mask IoU</th><th>Gaussians static + distractor</th></tr>\n";
+  body +=
+      "<h2>Final point of every run</h2>\n<table><tr><th>scene</th><th>run</th><th>steps</th><th>training "
+      "time</th><th>test PSNR</th><th>SSIM</th><th>mask IoU</th><th>Gaussians static + distractor</th></tr>\n";
   for (const std::string& scene : scenes)
     for (const std::string& run : runs) {
       const BenchPoint* last = nullptr;
@@ -55,9 +60,8 @@ ReportResult write_bench_report(const fs::path& out_dir, const std::vector<Bench
     }
   body += "</table>\n<p>Every measured point: <code>bench.csv</code> in this folder.</p>\n";
   const std::string html = page_start("desplat benchmark report") +
-                           row("machine", machine_text())
-                               .insert(0, "<table>\n") +
-                           "</table>\n" + note_paragraph(plotter) + body + "</body></html>\n";
+                           row("machine", machine_text()).insert(0, "<table>\n") + "</table>\n" +
+                           note_paragraph(plotter) + body + "</body></html>\n";
   ReportResult r{out_dir / "report.html", plotter.drawn(), plotter.note()};
   write_file_atomically(r.path, html);
   return r;

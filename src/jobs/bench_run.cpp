@@ -1,6 +1,6 @@
 #include "desplat/jobs/bench_run.hpp"
-#include "desplat/io/output_folder.hpp"
 #include "desplat/io/json_text.hpp"
+#include "desplat/io/output_folder.hpp"
 
 #include "desplat/core/stopwatch.hpp"
 
@@ -14,14 +14,14 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "desplat/eval/mask_metrics.hpp"
+#include "desplat/eval/plot.hpp"
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/image_io.hpp"
-#include "desplat/eval/plot.hpp"
 #include "desplat/jobs/clutter_summary.hpp"
-#include "desplat/eval/mask_metrics.hpp"
+#include "desplat/jobs/training_run.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
-#include "desplat/jobs/training_run.hpp"
 
 namespace desplat {
 namespace fs = std::filesystem;
@@ -50,9 +50,8 @@ std::string scene_name(const fs::path& scene) {
 }
 
 bool finished(const std::vector<BenchPoint>& points, const std::string& scene, const std::string& run, int64_t steps) {
-  return std::any_of(points.begin(), points.end(), [&](const BenchPoint& p) {
-    return p.scene == scene && p.run == run && p.step == steps;
-  });
+  return std::any_of(points.begin(), points.end(),
+                     [&](const BenchPoint& p) { return p.scene == scene && p.run == run && p.step == steps; });
 }
 
 double mean(const std::vector<ViewMetrics>& m, double ViewMetrics::*field) {
@@ -107,11 +106,16 @@ BenchGrid read_bench_grid(const fs::path& file) {
             fail("each entry of \"runs\" must be an object such as {\"name\": \"default\"}, not " + r.dump());
           BenchRun run;
           for (const auto& [rk, rv] : r.items()) {
-            if (rk == "name") run.name = rv.get<std::string>();
-            else if (rk == "config") run.config = rv;
-            else if (rk == "downscale") run.downscale = rv.get<int>();
-            else if (rk == "preset") run.preset = rv.get<std::string>();
-            else fail("unknown run setting '" + rk + "'");
+            if (rk == "name")
+              run.name = rv.get<std::string>();
+            else if (rk == "config")
+              run.config = rv;
+            else if (rk == "downscale")
+              run.downscale = rv.get<int>();
+            else if (rk == "preset")
+              run.preset = rv.get<std::string>();
+            else
+              fail("unknown run setting '" + rk + "'");
           }
           g.runs.push_back(run);
         }
@@ -128,7 +132,8 @@ BenchGrid read_bench_grid(const fs::path& file) {
   std::set<std::string> names;
   for (const BenchRun& r : g.runs) {
     if (r.name.empty()) fail("a run without a name");
-    if (r.name.find_first_of(",\"\n") != std::string::npos) fail("run name '" + r.name + "' contains , \" or a newline");
+    if (r.name.find_first_of(",\"\n") != std::string::npos)
+      fail("run name '" + r.name + "' contains , \" or a newline");
     if (!names.insert(r.name).second) fail("two runs named '" + r.name + "'");
     if (r.downscale < 1) fail("run '" + r.name + "': downscale must be ≥ 1");
     try {
@@ -207,8 +212,8 @@ std::vector<BenchPoint> run_bench(const BenchGrid& grid, const fs::path& out_dir
       }
       const std::vector<TrainView>& test_views = grid.score_at_full_resolution ? full->test : data.test;
       if (test_views.empty()) throw std::invalid_argument(scene_dir.string() + " has no test views to score");
-      const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
-                                         [](const SceneView& v) { return !v.mask_path.empty(); });
+      const bool has_masks =
+          std::any_of(scene.views.begin(), scene.views.end(), [](const SceneView& v) { return !v.mask_path.empty(); });
       Trainer trainer(data, config);
       double seconds = 0;
       while (trainer.current_step() < config.iterations) {
@@ -283,8 +288,10 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
       }
       if (series.empty()) continue;
       const fs::path file = out_dir / (scene + "_" + metric.file + "_vs_time.png");
-      write_plot(file, line_plot(scene + ": " + metric.label + " against training time", "training wall time (s)", metric.label),
-                 series);
+      write_plot(
+          file,
+          line_plot(scene + ": " + metric.label + " against training time", "training wall time (s)", metric.label),
+          series);
       written.push_back(file);
     }
   // Final PSNR against clutter ratio, one series per run, over scenes that carry a ratio.
@@ -305,7 +312,8 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
   }
   if (!clutter.empty()) {
     const fs::path file = out_dir / "psnr_vs_clutter.png";
-    write_plot(file, line_plot("final test PSNR against clutter ratio", "cluttered training views (%)", "test PSNR (dB)"),
+    write_plot(file,
+               line_plot("final test PSNR against clutter ratio", "cluttered training views (%)", "test PSNR (dB)"),
                clutter);
     written.push_back(file);
   }
@@ -326,13 +334,17 @@ std::vector<fs::path> write_bench_plots(const fs::path& out_dir, const std::vect
     }
     if (!recovered.empty()) {
       const fs::path file = out_dir / "recovered_vs_clutter.png";
-      write_plot(file, line_plot("recovered fraction (DeSplat − static-only) / (clean − static-only)",
-                                 "cluttered training views (%)", "recovered fraction"), recovered);
+      write_plot(file,
+                 line_plot("recovered fraction (DeSplat − static-only) / (clean − static-only)",
+                           "cluttered training views (%)", "recovered fraction"),
+                 recovered);
       written.push_back(file);
     }
     if (!iou.empty()) {
       const fs::path file = out_dir / "iou_vs_clutter.png";
-      write_plot(file, line_plot("distractor mask IoU against clutter ratio", "cluttered training views (%)", "mask IoU"), iou);
+      write_plot(file,
+                 line_plot("distractor mask IoU against clutter ratio", "cluttered training views (%)", "mask IoU"),
+                 iou);
       written.push_back(file);
     }
   }

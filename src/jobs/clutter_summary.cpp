@@ -43,8 +43,9 @@ std::vector<ClutterSummaryRow> clutter_summary(const std::vector<BenchPoint>& po
       r.recovered = cost > 0 ? (r.psnr - r.static_only_psnr) / cost : NAN;
       of_run.push_back(r);
     }
-    std::stable_sort(of_run.begin(), of_run.end(),
-                     [](const ClutterSummaryRow& a, const ClutterSummaryRow& b) { return a.clutter_ratio < b.clutter_ratio; });
+    std::stable_sort(of_run.begin(), of_run.end(), [](const ClutterSummaryRow& a, const ClutterSummaryRow& b) {
+      return a.clutter_ratio < b.clutter_ratio;
+    });
     rows.insert(rows.end(), of_run.begin(), of_run.end());
   }
   return rows;

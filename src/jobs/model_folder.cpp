@@ -157,15 +157,16 @@ ModelFolder::Config ModelFolder::read_config() const {
   if (!j.contains("train"))
     throw std::invalid_argument(file + " has no \"train\" settings, so desplat_train did not write it: " + what_to_do);
   if (!j.at("train").is_object())
-    throw std::invalid_argument(file + ": \"train\" must be an object of settings (it is " +
-                                j.at("train").type_name() + "): " + what_to_do);
+    throw std::invalid_argument(file + ": \"train\" must be an object of settings (it is " + j.at("train").type_name() +
+                                "): " + what_to_do);
   Config c;
   try {
     c.train = config_from_json(j.at("train"));
     c.unrecorded_settings = settings_absent_from(j.at("train"));
     c.run = j.value("run", json::object());
     if (!c.run.is_object())
-      throw std::invalid_argument(std::string("\"run\" must be an object (it is ") + c.run.type_name() + "): " + what_to_do);
+      throw std::invalid_argument(std::string("\"run\" must be an object (it is ") + c.run.type_name() +
+                                  "): " + what_to_do);
     if (j.contains("scene")) {
       c.scene = SceneRecipe::from_json(j.at("scene"));
       return c;
@@ -174,8 +175,7 @@ ModelFolder::Config ModelFolder::read_config() const {
     const SplitRule rule = SplitRule(c.run.at("split_rule").get<int>());
     if (rule != SplitRule::EveryNth && rule != SplitRule::AllTrain)
       throw std::invalid_argument("it was written by an older desplat that did not record the '" +
-                                  std::string(split_rule_name(rule)) +
-                                  "' split's files; train it again to render it");
+                                  std::string(split_rule_name(rule)) + "' split's files; train it again to render it");
     c.scene.data_dir = c.run.at("data_dir").get<std::string>();
     c.scene.downscale = c.run.at("downscale").get<int>();
     c.scene.split.rule = rule;
@@ -203,7 +203,8 @@ json ModelFolder::read_metrics() const { return read_json_file(metrics_path(), "
 
 std::vector<std::filesystem::path> ModelFolder::existing_training_outputs() const {
   std::vector<std::filesystem::path> found;
-  for (const char* name : {"config.json", "checkpoint.ckpt", "metrics.json", "point_cloud.ply", "renders", "report.html"})
+  for (const char* name :
+       {"config.json", "checkpoint.ckpt", "metrics.json", "point_cloud.ply", "renders", "report.html"})
     if (std::filesystem::exists(dir_ / name)) found.push_back(dir_ / name);
   return found;
 }

@@ -5,8 +5,8 @@
 
 #include "desplat/jobs/model_folder.hpp"
 
-#include <fstream>
 #include <algorithm>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -14,10 +14,10 @@
 #include <stdexcept>
 
 #include "desplat/io/checkpoint.hpp"
-#include "desplat/raster/composite.hpp"
 #include "desplat/io/image_io.hpp"
-#include "desplat/raster/raster.hpp"
 #include "desplat/io/scene.hpp"
+#include "desplat/raster/composite.hpp"
+#include "desplat/raster/raster.hpp"
 #include "desplat/train/train_config_json.hpp"
 #include "desplat/train/trainer.hpp"
 #include "desplat/train/training_checkpoint.hpp"
@@ -157,12 +157,12 @@ int run_render(const RenderRunOptions& o) {
     if (learned_bg)
       sky_pass.forward(sky, sky_embedding, view.camera,
                        train.background.sh_degree_at(ckpt.metadata.value("step", int64_t(0))), o.threads);
-    const Background bg = o.alpha ? Background(std::array<float, 3>{0, 0, 0})
+    const Background bg = o.alpha      ? Background(std::array<float, 3>{0, 0, 0})
                           : learned_bg ? sky_pass.background()
                                        : Background(train.eval_background);
     const ViewLayers layers = render_view_layers(statics, d, view.camera, rs, bg, recolor);
     const fs::path stem = o.out_dir / fs::path(view.name).replace_extension();
-    const FloatImage& image = o.layer == "static" ? layers.statics
+    const FloatImage& image = o.layer == "static"       ? layers.statics
                               : o.layer == "distractor" ? layers.distractor
                                                         : layers.composite;
     if (o.alpha) {

@@ -7,7 +7,7 @@
 
 namespace desplat::assets {
 
-extern const std::string_view report_css;           // report.css: the page's style
+extern const std::string_view report_css;            // report.css: the page's style
 extern const std::string_view report_self_check_js;  // report_self_check.js: counts images and plots on load
 extern const std::string_view splat_viewer_js;       // splat_viewer.js: the WebGL2 viewer (splat_viewer.hpp)
 

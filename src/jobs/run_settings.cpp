@@ -11,8 +11,8 @@
 #include "desplat/train/effects.hpp"
 #include "desplat/train/presets.hpp"
 #include "desplat/train/train_config_json.hpp"
-#include "desplat/train/transient_probe.hpp"
 #include "desplat/train/trainer.hpp"
+#include "desplat/train/transient_probe.hpp"
 #include "jobs/text_format.hpp"
 
 namespace desplat {
@@ -36,8 +36,8 @@ std::string first_items(const std::vector<std::string>& items, size_t shown, con
 json effects_evidence_json(const EffectsEvidence& ev, const std::vector<std::string>& reasons) {
   json views = json::array();
   for (const ViewEvidence& v : ev.views)
-    views.push_back({{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain},
-                     {"open_top_share", v.open_top_share}});
+    views.push_back(
+        {{"name", v.name}, {"samples", v.samples}, {"log2_gain", v.log2_gain}, {"open_top_share", v.open_top_share}});
   return {{"reasons", reasons},
           {"judged_views", ev.judged_views},
           {"exposure_spread_stops", ev.exposure_spread_stops},
@@ -60,8 +60,8 @@ json transient_evidence_json(const TransientEvidence& te, const TrainingData& da
 
 // Whether the command names any setting beyond the run's length and threads.
 bool names_settings(const TrainingRunOptions& opt) {
-  return opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") || opt.seed || opt.batch || opt.static_only ||
-         opt.distractors_per_view || opt.no_distractor_density || opt.no_regularization;
+  return opt.preset || !opt.config.empty() || (opt.effects && *opt.effects != "auto") || opt.seed || opt.batch ||
+         opt.static_only || opt.distractors_per_view || opt.no_distractor_density || opt.no_regularization;
 }
 
 // --resume continues the model with the settings it was trained with (`trained_with`, from
@@ -74,16 +74,18 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
                                const TrainingRunOptions& opt, const json& config_overrides, const json& resumed_run,
                                const std::string& record) {
   if (names_settings(opt)) {
-    const std::vector<std::string> differ =
-        config_differences(effective_config(asked, data), trained_with, record, {"iterations", "threads", "kernel_isa"});
+    const std::vector<std::string> differ = config_differences(effective_config(asked, data), trained_with, record,
+                                                               {"iterations", "threads", "kernel_isa"});
     if (!differ.empty()) {
       const std::string list = first_items(differ, 6, "; ");
-      throw std::invalid_argument("--resume continues the model with the settings it was trained with, and this "
-                                  "command changes " + std::to_string(differ.size()) + " of them: " + list +
-                                  ". Resume without settings options (the run was started with --preset " +
-                                  resumed_run.value("preset", std::string("default")) + " and effects " +
-                                  resumed_run.value("effects", std::string("unrecorded")) +
-                                  "), or start again with --overwrite to train with new ones");
+      throw std::invalid_argument(
+          "--resume continues the model with the settings it was trained with, and this "
+          "command changes " +
+          std::to_string(differ.size()) + " of them: " + list +
+          ". Resume without settings options (the run was started with --preset " +
+          resumed_run.value("preset", std::string("default")) + " and effects " +
+          resumed_run.value("effects", std::string("unrecorded")) +
+          "), or start again with --overwrite to train with new ones");
     }
   }
   TrainConfig out = trained_with;
@@ -142,7 +144,8 @@ json read_config_option(const std::string& config) {
   if (!inline_text) {
     std::error_code ec;
     if (!fs::is_regular_file(config, ec))
-      throw std::invalid_argument("--config '" + config + "' is neither a JSON object of settings (e.g. --config "
+      throw std::invalid_argument("--config '" + config +
+                                  "' is neither a JSON object of settings (e.g. --config "
                                   "'{\"num_downscales\": 0}') nor a file that exists: give one of the two");
     std::ifstream f(config);
     if (!f) throw std::invalid_argument("cannot read " + source + ": check its permissions");
@@ -164,9 +167,10 @@ json read_config_option(const std::string& config) {
                           });
   if (run_record) {
     if (j.size() > 1)
-      std::printf("%s is a run's config.json: its \"train\" settings apply; its \"scene\" and \"run\" records are "
-                  "ignored (this run's data, split and effects come from --data, the split options and --effects)\n",
-                  source.c_str());
+      std::printf(
+          "%s is a run's config.json: its \"train\" settings apply; its \"scene\" and \"run\" records are "
+          "ignored (this run's data, split and effects come from --data, the split options and --effects)\n",
+          source.c_str());
     j = j.at("train");
   }
   try {
@@ -237,13 +241,14 @@ std::optional<ResolvedSettings> resolve_settings(const RequestedSettings& reques
   if (resumed && !resumed->unrecorded_settings.empty()) {
     // Said before anything trains: the rest of the run uses today's defaults for them.
     const std::vector<std::string>& missing = resumed->unrecorded_settings;
-    std::printf("warning: %s records no value for %zu setting%s (%s): it was written by an older desplat, and the "
-                "resumed run uses today's defaults for them\n",
-                record_name.c_str(), missing.size(), missing.size() == 1 ? "" : "s",
-                first_items(missing, 6, ", ").c_str());
+    std::printf(
+        "warning: %s records no value for %zu setting%s (%s): it was written by an older desplat, and the "
+        "resumed run uses today's defaults for them\n",
+        record_name.c_str(), missing.size(), missing.size() == 1 ? "" : "s", first_items(missing, 6, ", ").c_str());
   }
   if (resumed)
-    out.config = settings_to_resume(resumed->train, out.config, data, opt, requested.overrides, resumed_run, record_name);
+    out.config =
+        settings_to_resume(resumed->train, out.config, data, opt, requested.overrides, resumed_run, record_name);
   out.run = {{"static_only", opt.static_only},
              {"preset", resumed_run.value("preset", requested.preset)},
              {"effects", Effects::of(out.config).to_string()},

@@ -32,7 +32,8 @@ int run_sfm_job(sfm::SfmOptions options, bool quiet) {
 
 std::string sfm_summary_text(const sfm::SfmResult& r) {
   char line[512];
-  std::snprintf(line, sizeof line, "registered %d of %d photos, %d points; %s (features %s, %s matching %s, mapping %s)\n",
+  std::snprintf(line, sizeof line,
+                "registered %d of %d photos, %d points; %s (features %s, %s matching %s, mapping %s)\n",
                 r.num_registered, r.num_photos, r.num_points, format_duration(r.seconds).c_str(),
                 format_duration(r.extract_seconds).c_str(), sfm::matcher_name(r.matcher),
                 format_duration(r.match_seconds).c_str(), format_duration(r.map_seconds).c_str());
@@ -65,16 +66,21 @@ std::string sfm_training_summary_text(const sfm::SfmResult& r) {
   std::snprintf(line, sizeof line,
                 "SfM: %d of %d photos registered, %d points, mean track length %.2f, mean reprojection error %.2f px "
                 "(%.0f s)\n",
-                r.num_registered, r.num_photos, r.num_points, r.mean_track_length, r.mean_reprojection_error, r.seconds);
+                r.num_registered, r.num_photos, r.num_points, r.mean_track_length, r.mean_reprojection_error,
+                r.seconds);
   return line + sfm::describe_attempts(r) + sfm::describe_lost_photos(r);
 }
 
 json sfm_json(const sfm::SfmResult& r) {
   json skipped = json::array(), unregistered = json::array(), attempts = json::array();
   for (const sfm::SfmAttempt& a : r.attempts)
-    attempts.push_back({{"step", a.step}, {"settings", a.settings}, {"registered", a.registered},
-                        {"points", a.points}, {"seconds", a.seconds}});
-  for (const sfm::SkippedFile& f : r.skipped) skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
+    attempts.push_back({{"step", a.step},
+                        {"settings", a.settings},
+                        {"registered", a.registered},
+                        {"points", a.points},
+                        {"seconds", a.seconds}});
+  for (const sfm::SkippedFile& f : r.skipped)
+    skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
   for (const sfm::SkippedFile& f : r.unregistered)
     unregistered.push_back({{"photo", f.path.generic_string()}, {"reason", f.reason}});
   return {{"photos", r.num_photos},

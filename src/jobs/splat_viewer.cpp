@@ -62,7 +62,6 @@ ViewerCamera framing(const GaussianSet& g) {
   return c;
 }
 
-
 }  // namespace
 
 std::string splat_viewer_section(const GaussianSet& g, const std::optional<ViewerCamera>& start,

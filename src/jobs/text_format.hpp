@@ -30,15 +30,20 @@ inline std::string format_duration(double seconds, DurationStyle style = Duratio
   char text[48];
   if (style == DurationStyle::compact) {
     const long t = std::isfinite(seconds) ? long(std::max(0.0, seconds)) : 0;
-    if (t >= 3600) std::snprintf(text, sizeof text, "%ldh%02ldm", t / 3600, t / 60 % 60);
-    else std::snprintf(text, sizeof text, "%ldm%02lds", t / 60, t % 60);
+    if (t >= 3600)
+      std::snprintf(text, sizeof text, "%ldh%02ldm", t / 3600, t / 60 % 60);
+    else
+      std::snprintf(text, sizeof text, "%ldm%02lds", t / 60, t % 60);
     return text;
   }
   if (!std::isfinite(seconds)) return "n/a";
   const long t = std::lround(seconds);
-  if (t >= 3600) std::snprintf(text, sizeof text, "%ld h %02ld min", t / 3600, t / 60 % 60);
-  else if (t >= 60) std::snprintf(text, sizeof text, "%ld min %02ld s", t / 60, t % 60);
-  else std::snprintf(text, sizeof text, "%.1f s", seconds);
+  if (t >= 3600)
+    std::snprintf(text, sizeof text, "%ld h %02ld min", t / 3600, t / 60 % 60);
+  else if (t >= 60)
+    std::snprintf(text, sizeof text, "%ld min %02ld s", t / 60, t % 60);
+  else
+    std::snprintf(text, sizeof text, "%.1f s", seconds);
   return text;
 }
 

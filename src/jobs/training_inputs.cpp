@@ -43,7 +43,8 @@ TrainingData load_training_data(const Scene& scene) {
         views[i].keep.assign(keep.begin(), keep.end());
         // What the mask hides is never read: zero it, so no rule can use it by accident.
         for (size_t p = 0; p < views[i].keep.size(); ++p)
-          if (views[i].keep[p] == 0) views[i].image.pixels[3 * p] = views[i].image.pixels[3 * p + 1] = views[i].image.pixels[3 * p + 2] = 0;
+          if (views[i].keep[p] == 0)
+            views[i].image.pixels[3 * p] = views[i].image.pixels[3 * p + 1] = views[i].image.pixels[3 * p + 2] = 0;
       }
     } catch (const std::exception& e) {
 #pragma omp critical
@@ -53,7 +54,8 @@ TrainingData load_training_data(const Scene& scene) {
   if (!error.empty()) throw SceneError(error);
   if (const auto n = std::count(rounded.begin(), rounded.end(), 1); n > 0) {
     const std::string first = scene.views[size_t(std::find(rounded.begin(), rounded.end(), 1) - rounded.begin())].name;
-    const std::string message = std::to_string(n) + " of " + std::to_string(rounded.size()) + " photos (first: " + first +
+    const std::string message = std::to_string(n) + " of " + std::to_string(rounded.size()) +
+                                " photos (first: " + first +
                                 ") hold more than 8 bits per channel or values outside [0, 1]; training rounds them "
                                 "to 8 bits, clamped to [0, 1]";
     report_warning(scene.on_warning, message);
@@ -64,7 +66,8 @@ TrainingData load_training_data(const Scene& scene) {
     (scene.views[i].is_test ? data.test : data.train).push_back(std::move(views[i]));
   }
   // The tracks, for transient_points (train/transient_points.hpp).
-  if (scene.point_views.size() == scene.points_xyz.size() && scene.point_track_images.size() == scene.points_xyz.size()) {
+  if (scene.point_views.size() == scene.points_xyz.size() &&
+      scene.point_track_images.size() == scene.points_xyz.size()) {
     data.point_track_images = scene.point_track_images;
     data.point_train_views.resize(scene.point_views.size());
     for (size_t p = 0; p < scene.point_views.size(); ++p)

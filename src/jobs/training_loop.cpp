@@ -14,7 +14,6 @@
 namespace desplat {
 using json = nlohmann::json;
 
-
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -38,11 +37,12 @@ class Progress {
     const double eta = (total_ - step) / std::max(rate, 1e-9);
     char line[256];
     std::snprintf(line, sizeof line, "%6lld/%lld %3d%% ETA %s  loss %.4f  psnr %.2f  %zu Gaussians  %.2f it/s",
-                  (long long)step, (long long)total_, int(100 * step / total_), format_duration(eta, DurationStyle::compact).c_str(), s.loss,
-                  s.psnr, s.gaussians, rate);
+                  (long long)step, (long long)total_, int(100 * step / total_),
+                  format_duration(eta, DurationStyle::compact).c_str(), s.loss, s.psnr, s.gaussians, rate);
     if (tty_) {
       const int width = 20, filled = int(width * step / total_);
-      std::printf("\r[%s%s] %s\033[K", std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(), line);
+      std::printf("\r[%s%s] %s\033[K", std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(),
+                  line);
       if (step == total_) std::printf("\n");
     } else {
       std::printf("%s\n", line);
@@ -96,8 +96,8 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
   TrainingRecord r;
   const TrainConfig& config = trainer.config();
   const TrainingData& data = trainer.data();
-  const bool has_masks = std::any_of(scene.views.begin(), scene.views.end(),
-                                     [](const SceneView& v) { return !v.mask_path.empty(); });
+  const bool has_masks =
+      std::any_of(scene.views.begin(), scene.views.end(), [](const SceneView& v) { return !v.mask_path.empty(); });
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
   const int64_t first = trainer.current_step();
@@ -135,15 +135,16 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
     if (reaches_multiple(before, done, curve_every) || done == config.iterations) {
       r.history.push_back({{"kind", "training"},
-                         {"step", done},
-                         {"wall_seconds", elapsed},
-                         {"loss", curve_loss / curve_steps},
-                         {"psnr", curve_psnr / curve_steps},
-                         {"gaussians", s.gaussians},
-                         {"distractor_gaussians", trainer.distractor_count()}});
+                           {"step", done},
+                           {"wall_seconds", elapsed},
+                           {"loss", curve_loss / curve_steps},
+                           {"psnr", curve_psnr / curve_steps},
+                           {"gaussians", s.gaussians},
+                           {"distractor_gaussians", trainer.distractor_count()}});
       curve_loss = curve_psnr = 0, curve_steps = 0;
     }
-    if (opt.eval_every > 0 && reaches_multiple(before, done, opt.eval_every) && done < config.iterations && !data.test.empty()) {
+    if (opt.eval_every > 0 && reaches_multiple(before, done, opt.eval_every) && done < config.iterations &&
+        !data.test.empty()) {
       json m = metrics_json(trainer.evaluate(data.test));
       json point = {{"kind", "evaluation"},
                     {"step", done},
@@ -155,7 +156,8 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
       if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
       r.history.push_back(point);
     }
-    if (opt.checkpoint_every > 0 && reaches_multiple(before, done, opt.checkpoint_every) && done < config.iterations) save();
+    if (opt.checkpoint_every > 0 && reaches_multiple(before, done, opt.checkpoint_every) && done < config.iterations)
+      save();
   }
   r.wall_seconds = run_clock.seconds();
   return r;

@@ -23,8 +23,12 @@ json metrics_json(const std::vector<ViewMetrics>& m) {
   json per = json::array();
   double psnr_sum = 0, ssim_sum = 0, right_psnr_sum = 0, right_ssim_sum = 0;
   for (const ViewMetrics& v : m) {
-    per.push_back({{"name", v.name}, {"psnr", v.psnr}, {"ssim", v.ssim}, {"protocol", to_string(v.protocol)},
-                   {"psnr_right_half", v.psnr_right_half}, {"ssim_right_half", v.ssim_right_half}});
+    per.push_back({{"name", v.name},
+                   {"psnr", v.psnr},
+                   {"ssim", v.ssim},
+                   {"protocol", to_string(v.protocol)},
+                   {"psnr_right_half", v.psnr_right_half},
+                   {"ssim_right_half", v.ssim_right_half}});
     // Which look the Photo Tourism fit started from (a training view's name, or "mean").
     if (!v.look.start.empty()) per.back()["look_start"] = v.look.start;
     psnr_sum += v.psnr, ssim_sum += v.ssim;
@@ -79,12 +83,9 @@ json model_cost(const Trainer& t) {
     distractor_mb += parameter_mb(d);
     nonempty += d.size() > 0;
   }
-  return {{"static_gaussians", t.gaussians().size()},
-          {"static_mb", parameter_mb(t.gaussians())},
-          {"distractor_gaussians", t.distractor_count()},
-          {"distractor_mb", distractor_mb},
-          {"views_with_distractors", nonempty},
-          {"distractors_per_view", per_view}};
+  return {{"static_gaussians", t.gaussians().size()},     {"static_mb", parameter_mb(t.gaussians())},
+          {"distractor_gaussians", t.distractor_count()}, {"distractor_mb", distractor_mb},
+          {"views_with_distractors", nonempty},           {"distractors_per_view", per_view}};
 }
 
 }  // namespace
@@ -139,37 +140,40 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
   metrics["history"] = record.history;
   metrics["wall_seconds_this_run"] = record.wall_seconds;
   metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;
-  metrics["median_step_seconds_full_resolution"] = {{"forward", median(record.forward)},
-                                                     {"backward", median(record.backward)},
-                                                     {"loss", median(record.loss)},
-                                                     {"optimizer_and_density", median(record.optimizer)},
-                                                     {"distractor_branch", median(record.distractor)},
-                                                     {"appearance", median(record.appearance)},
-                                                     {"background", median(record.background)},
-                                                     {"total", median(record.total)},
-                                                     {"distractor_share", median(record.distractor_share)},
-                                                     {"steps_measured", record.forward.size()},
-                                                     // the static layer's render:
-                                                     {"pairs", median(record.pairs)},
-                                                     {"ns_per_pair_forward", median(record.ns_forward)},
-                                                     {"ns_per_pair_forward_backward", median(record.ns_forward_backward)},
-                                                     {"visible_share", median(record.visible_share)},
-                                                     {"kernel_isa", kernel_isa_name(resolve_kernel_isa(config.kernel_isa))}};
+  metrics["median_step_seconds_full_resolution"] = {
+      {"forward", median(record.forward)},
+      {"backward", median(record.backward)},
+      {"loss", median(record.loss)},
+      {"optimizer_and_density", median(record.optimizer)},
+      {"distractor_branch", median(record.distractor)},
+      {"appearance", median(record.appearance)},
+      {"background", median(record.background)},
+      {"total", median(record.total)},
+      {"distractor_share", median(record.distractor_share)},
+      {"steps_measured", record.forward.size()},
+      // the static layer's render:
+      {"pairs", median(record.pairs)},
+      {"ns_per_pair_forward", median(record.ns_forward)},
+      {"ns_per_pair_forward_backward", median(record.ns_forward_backward)},
+      {"visible_share", median(record.visible_share)},
+      {"kernel_isa", kernel_isa_name(resolve_kernel_isa(config.kernel_isa))}};
   ModelFolder(opt.out_dir).write_metrics(metrics);
-  const std::string scores =
-      final_metrics.empty() ? std::string("no test views to score (the split left none)")
-                            : "test PSNR " + fixed(metrics["mean_psnr"].get<double>(), 2) + " dB, SSIM " +
-                                  fixed(metrics["mean_ssim"].get<double>(), 4);
+  const std::string scores = final_metrics.empty() ? std::string("no test views to score (the split left none)")
+                                                   : "test PSNR " + fixed(metrics["mean_psnr"].get<double>(), 2) +
+                                                         " dB, SSIM " + fixed(metrics["mean_ssim"].get<double>(), 4);
   std::printf("done: %lld steps in %s, %zu static + %zu distractor Gaussians; %s\n", (long long)trainer.current_step(),
-              format_duration(record.wall_seconds, DurationStyle::compact).c_str(), trainer.gaussians().size(), trainer.distractor_count(), scores.c_str());
+              format_duration(record.wall_seconds, DurationStyle::compact).c_str(), trainer.gaussians().size(),
+              trainer.distractor_count(), scores.c_str());
   if (!masks.views.empty())
-    std::printf("distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
-                masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
+    std::printf(
+        "distractor masks: mean IoU %.3f over %d occluded training views; %.2f%% false positives on %d clean views\n",
+        masks.mean_iou, masks.occluded_views, 100 * masks.mean_clean_view_false_positive, masks.clean_views);
   const ReportResult report = write_report(opt.out_dir);
   if (!report.note.empty()) std::printf("report: %s\n", report.note.c_str());
-  std::printf("outputs in %s: report.html (open it in a browser), metrics.json, renders/test/%s, point_cloud.ply, "
-              "checkpoint.ckpt\n",
-              fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
-  }
+  std::printf(
+      "outputs in %s: report.html (open it in a browser), metrics.json, renders/test/%s, point_cloud.ply, "
+      "checkpoint.ckpt\n",
+      fs::absolute(opt.out_dir).c_str(), config.distractors.enabled ? ", renders/train/" : "");
+}
 
 }  // namespace desplat

@@ -54,8 +54,10 @@ std::string effects_modelled(const json& m, const json& c) {
     text = "static scene";
     std::vector<std::string> off;
     const auto part = [&](bool on, const char* what, const char* name) {
-      if (on) text += std::string(" + ") + what;
-      else off.push_back(name);
+      if (on)
+        text += std::string(" + ") + what;
+      else
+        off.push_back(name);
     };
     part(e.distractors, "per-view distractors (DeSplat)", "distractors");
     part(e.appearance, "per-image appearance (exposure and colour)", "appearance");
@@ -72,12 +74,11 @@ std::string summary(const json& m, const json& c) {
   const json scene = c.value("scene", json::object());
   const json cost = m.value("cost", json::object());
   std::string s = "<h2>Summary</h2>\n<table>\n";
-  s += row("scene", scene.value("data_dir", std::string("?")) + " (downscale " +
-                        std::to_string(scene.value("downscale", 1)) + ", " +
-                        std::to_string(scene.value("train_views", json::array()).size()) + " training and " +
-                        std::to_string(scene.value("test_views", json::array()).size()) + " test views" +
-                        (scene.contains("masks_dir") ? ", masks from " + scene["masks_dir"].get<std::string>() : "") +
-                        ")");
+  s += row("scene",
+           scene.value("data_dir", std::string("?")) + " (downscale " + std::to_string(scene.value("downscale", 1)) +
+               ", " + std::to_string(scene.value("train_views", json::array()).size()) + " training and " +
+               std::to_string(scene.value("test_views", json::array()).size()) + " test views" +
+               (scene.contains("masks_dir") ? ", masks from " + scene["masks_dir"].get<std::string>() : "") + ")");
   s += row("effects modelled", effects_modelled(m, c));
   s += row("test PSNR / SSIM", std::isnan(number(m, "mean_psnr"))
                                    ? "no test views"
@@ -134,10 +135,11 @@ std::string structure_from_motion(const json& m) {
   const json& sfm = m.contains("sfm") ? m["sfm"] : json();
   if (!sfm.is_object()) return "";
   std::string s = "<h2>Structure from motion</h2>\n<table>\n";
-  s += row("photos placed", std::to_string(sfm.value("registered", 0)) + " of " + std::to_string(sfm.value("photos", 0)) +
-                                ", " + std::to_string(sfm.value("points", 0)) + " points, mean track length " +
-                                shown(number(sfm, "mean_track_length"), 2) + ", mean reprojection error " +
-                                shown(number(sfm, "mean_reprojection_error_px"), 2) + " px");
+  s += row("photos placed", std::to_string(sfm.value("registered", 0)) + " of " +
+                                std::to_string(sfm.value("photos", 0)) + ", " + std::to_string(sfm.value("points", 0)) +
+                                " points, mean track length " + shown(number(sfm, "mean_track_length"), 2) +
+                                ", mean reprojection error " + shown(number(sfm, "mean_reprojection_error_px"), 2) +
+                                " px");
   s += row("cameras", sfm.value("cameras", std::string("?")));
   if (sfm.contains("matching")) s += row("matching", sfm.value("matching", std::string("?")));
   if (!sfm.value("warning", std::string()).empty()) s += row("warning", sfm["warning"].get<std::string>());
@@ -190,9 +192,11 @@ std::string curves(const json& m, Plotter& plotter) {
   s += plot_frame(plotter.svg(line_plot("loss against step", "step", "loss"), {loss}), "loss");
   s += plot_frame(plotter.svg(line_plot("PSNR against step", "step", "PSNR [dB]"), psnr_series), "psnr");
   s += plot_frame(plotter.svg(line_plot("Gaussians against step", "step", "Gaussians"), count_series), "gaussians");
-  s += plot_frame(plotter.svg(line_plot("PSNR against wall time", "wall time [s]", "PSNR [dB]"), time_series), "psnr-time");
-  s += plot_frame(plotter.svg(line_plot("static Gaussians against wall time", "wall time [s]", "Gaussians"), {count_time}),
-                  "gaussians-time");
+  s += plot_frame(plotter.svg(line_plot("PSNR against wall time", "wall time [s]", "PSNR [dB]"), time_series),
+                  "psnr-time");
+  s += plot_frame(
+      plotter.svg(line_plot("static Gaussians against wall time", "wall time [s]", "Gaussians"), {count_time}),
+      "gaussians-time");
   return s;
 }
 
@@ -268,10 +272,10 @@ ReportResult write_report(const fs::path& model_dir) {
   Plotter plotter(model_dir / ".report_tmp");
   std::string html = page_start("desplat training report: " + fs::absolute(model_dir).filename().string());
   std::string body = summary(metrics, config) + structure_from_motion(metrics) + viewer(model_dir, config) +
-                     curves(metrics, plotter) +
-                     step_breakdown(metrics, plotter) + test_views(metrics, model_dir) +
+                     curves(metrics, plotter) + step_breakdown(metrics, plotter) + test_views(metrics, model_dir) +
                      decomposition(metrics, model_dir);
-  html += note_paragraph(plotter) + body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) + "</pre>\n</body></html>\n";
+  html += note_paragraph(plotter) + body + "<h2>Configuration (config.json)</h2>\n<pre>" + escape_html(config.dump(2)) +
+          "</pre>\n</body></html>\n";
   ReportResult r{model_dir / "report.html", plotter.drawn(), plotter.note()};
   write_file_atomically(r.path, html);
   return r;

@@ -63,31 +63,36 @@ void describe_run(const TrainConfig& config, const RunInputs& inputs) {
   // downscaled images and score poorly at full resolution.
   const int64_t full_resolution_from = config.full_resolution_from();
   if (full_resolution_from >= config.iterations)
-    std::printf("warning: this run never trains at full resolution (the resolution schedule reaches it at step "
-                "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
-                (long long)full_resolution_from, (long long)config.iterations);
+    std::printf(
+        "warning: this run never trains at full resolution (the resolution schedule reaches it at step "
+        "%lld of %lld); add {\"num_downscales\": 0} to --config or train longer\n",
+        (long long)full_resolution_from, (long long)config.iterations);
   // The default waits for step 3,000 before seeding distractors (docs/METHOD.md §7): a
   // shorter run never grows a buffer onto an occluder its initial distractors missed.
   const DistractorSettings& ds = config.distractors;
-  if (config.distractors.enabled && (ds.seed_uncovered || ds.reseed_starved_views) && ds.seed_after >= config.iterations)
-    std::printf("warning: distractor seeding starts at step %d (distractors.seed_after), after this run's %lld steps; "
-                "for a run this short use --preset fast, or add {\"distractors\": {\"seed_after\": 0}} to --config\n",
-                ds.seed_after, (long long)config.iterations);
+  if (config.distractors.enabled && (ds.seed_uncovered || ds.reseed_starved_views) &&
+      ds.seed_after >= config.iterations)
+    std::printf(
+        "warning: distractor seeding starts at step %d (distractors.seed_after), after this run's %lld steps; "
+        "for a run this short use --preset fast, or add {\"distractors\": {\"seed_after\": 0}} to --config\n",
+        ds.seed_after, (long long)config.iterations);
 
   if (config.appearance.enabled)
-    std::printf("appearance model: embeddings of %d per training image and %d per Gaussian, MLP %d x %d; test views are "
-                "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps from %s; scored on the "
-                "right)\n",
-                config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
-                config.appearance.hidden_width, config.appearance.test_steps,
-                config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
+    std::printf(
+        "appearance model: embeddings of %d per training image and %d per Gaussian, MLP %d x %d; test views are "
+        "scored by the Photo Tourism protocol (embedding fitted on the left half, %d steps from %s; scored on the "
+        "right)\n",
+        config.appearance.image_dim, config.appearance.feature_dim(), config.appearance.hidden_layers,
+        config.appearance.hidden_width, config.appearance.test_steps,
+        config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
   if (config.background.enabled)
-    std::printf("background model: embeddings of %d per training image, MLP %d x %d to spherical harmonics of degree %d; "
-                "test views are scored by the Photo Tourism protocol (embeddings fitted on the left half, %d steps from "
-                "%s)\n",
-                config.background.image_dim, config.background.hidden_layers, config.background.hidden_width,
-                config.background.sh_degree, config.appearance.test_steps,
-                config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
+    std::printf(
+        "background model: embeddings of %d per training image, MLP %d x %d to spherical harmonics of degree %d; "
+        "test views are scored by the Photo Tourism protocol (embeddings fitted on the left half, %d steps from "
+        "%s)\n",
+        config.background.image_dim, config.background.hidden_layers, config.background.hidden_width,
+        config.background.sh_degree, config.appearance.test_steps,
+        config.appearance.test_start_from_best_look ? "the training look that fits it best" : "the mean look");
 }
 
 // After the Trainer is built: what initialization did with transient points and the camera path.
@@ -99,17 +104,19 @@ void describe_trainer(const Trainer& trainer) {
                 to_string(config.transient_points.action).c_str(), (long long)trainer.transient_point_count,
                 data.points.size(), (long long)trainer.transient_seeded);
   if (const CameraPath& path = trainer.camera_path(); !path.empty())
-    std::printf("camera path: %zu segments between consecutive training views (%zu longer than %.2f x the median "
-                "scene depth skipped); static Gaussians within %.4f world units of it, or in a blind gap (within "
-                "%.2f x a step of it, in front, in neither photo) are culled\n",
-                path.from.size(), path.skipped_segments, double(config.densify.camera_path.max_segment), path.radius,
-                path.blind_gap);
+    std::printf(
+        "camera path: %zu segments between consecutive training views (%zu longer than %.2f x the median "
+        "scene depth skipped); static Gaussians within %.4f world units of it, or in a blind gap (within "
+        "%.2f x a step of it, in front, in neither photo) are culled\n",
+        path.from.size(), path.skipped_segments, double(config.densify.camera_path.max_segment), path.radius,
+        path.blind_gap);
 }
 
 }  // namespace
 
 int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
-  check_output_folder("--out", opt.out_dir, {{"--data", opt.data_dir}, {"--images", opt.images_dir}, {"--masks", opt.masks_dir}});
+  check_output_folder("--out", opt.out_dir,
+                      {{"--data", opt.data_dir}, {"--images", opt.images_dir}, {"--masks", opt.masks_dir}});
   refuse_earlier_outputs(opt);
   const RequestedSettings requested = request_settings(opt);
   const RunInputs inputs = load_run_inputs(opt);

@@ -23,11 +23,11 @@ namespace desplat {
 // What a run trains on, checked before anything is written to the output folder (SfM on
 // --images aside, which writes only <out>/sfm).
 struct RunInputs {
-  std::filesystem::path data_dir;             // --data, or SfM's model of --images
-  nlohmann::json sfm_summary;                 // null unless this run ran SfM
+  std::filesystem::path data_dir;  // --data, or SfM's model of --images
+  nlohmann::json sfm_summary;      // null unless this run ran SfM
   Scene scene;
   SceneRecipe recipe;
-  std::optional<ModelFolder::Config> resumed; // --resume: the model's config.json
+  std::optional<ModelFolder::Config> resumed;  // --resume: the model's config.json
   TrainingData data;
 };
 // Runs SfM on --images, loads the scene (on --resume at the downscale config.json records
@@ -41,8 +41,8 @@ struct TrainingRecord {
   nlohmann::json history = nlohmann::json::array();
   std::vector<double> forward, backward, loss, optimizer, distractor, appearance, background, total, distractor_share;
   std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
-  double wall_seconds = 0;  // this process's training, without the final evaluation
-  bool interrupted = false; // stopped by stop_requested (checkpoint written)
+  double wall_seconds = 0;   // this process's training, without the final evaluation
+  bool interrupted = false;  // stopped by stop_requested (checkpoint written)
 };
 // Trains `trainer` to config.iterations with progress output, periodic evaluation and
 // checkpoints (`save` writes one).

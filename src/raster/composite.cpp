@@ -120,7 +120,10 @@ ViewLayers render_view_layers(const GaussianSet& statics, const GaussianSet* dis
   const Layer ls{s.color, s.alpha};
   const Layer ld = with_d ? Layer{d.color, d.alpha} : Layer{};
   auto rgb = [&] { return FloatImage{camera.width, camera.height, 3, std::vector<float>(3 * pixels)}; };
-  ViewLayers out{rgb(), rgb(), rgb(), {camera.width, camera.height, 1, s.alpha},
+  ViewLayers out{rgb(),
+                 rgb(),
+                 rgb(),
+                 {camera.width, camera.height, 1, s.alpha},
                  {camera.width, camera.height, 1, with_d ? d.alpha : std::vector<float>(pixels, 0.0f)}};
   composite_layers(ls, {}, bg, out.statics.pixels);
   if (with_d) {

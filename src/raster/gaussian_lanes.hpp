@@ -24,8 +24,8 @@ struct LaneCamera {
   float lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;  // project_ewa's clamp of x/z and y/z
   float near_plane, far_plane, width, height;
 
-  LaneCamera(const float* R_cw_row_major, const float* t_cw, const PinholeIntrinsics& K, float eps,
-             float near, float far) {
+  LaneCamera(const float* R_cw_row_major, const float* t_cw, const PinholeIntrinsics& K, float eps, float near,
+             float far) {
     for (int k = 0; k < 9; ++k) W[k] = R_cw_row_major[k];
     for (int k = 0; k < 3; ++k) t[k] = t_cw[k];
     fx = K.fx, fy = K.fy, cx = K.cx, cy = K.cy, eps2d = eps;
@@ -69,9 +69,9 @@ inline void rotation_lanes(const LaneGaussians& g, LaneRotation& r) {
     const float w = ok ? u[0] / norm : 1.0f, x = ok ? u[1] / norm : 0.0f;
     const float y = ok ? u[2] / norm : 0.0f, z = ok ? u[3] / norm : 0.0f;
     r.q[0][l] = w, r.q[1][l] = x, r.q[2][l] = y, r.q[3][l] = z;
-    const float R[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)};
+    const float R[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                        2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                        2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
     for (int i = 0; i < 3; ++i)
       for (int k = 0; k < 3; ++k) {
         r.R[3 * i + k][l] = R[3 * i + k];
@@ -132,8 +132,7 @@ inline float capped_ceil(float v) {
 }
 
 // The EWA projection of a block (project_ewa, conic_from_cov2d and preprocess's culling).
-inline void project_lanes(const LaneCamera& c, const LaneGaussians& g, const float (&V)[6][kLanes],
-                          LaneProjection& o) {
+inline void project_lanes(const LaneCamera& c, const LaneGaussians& g, const float (&V)[6][kLanes], LaneProjection& o) {
   // The camera's numbers as locals and the visibility test without short-circuits (&, not
   // &&): conditional loads inside the loop keep the compiler from vectorizing it.
   const float W0 = c.W[0], W1 = c.W[1], W2 = c.W[2], W3 = c.W[3], W4 = c.W[4], W5 = c.W[5];
@@ -252,7 +251,8 @@ inline void backward_lanes(const LaneCamera& c, const LaneGaussians& g, const La
     const float Wm[9] = {W0, W1, W2, W3, W4, W5, W6, W7, W8};
     float dVW[9];  // dV W
     for (int i = 0; i < 3; ++i)
-      for (int k = 0; k < 3; ++k) dVW[3 * i + k] = dV[3 * i] * Wm[k] + dV[3 * i + 1] * Wm[3 + k] + dV[3 * i + 2] * Wm[6 + k];
+      for (int k = 0; k < 3; ++k)
+        dVW[3 * i + k] = dV[3 * i] * Wm[k] + dV[3 * i + 1] * Wm[3 + k] + dV[3 * i + 2] * Wm[6 + k];
     float dS[9];  // Wᵀ (dV W), symmetric
     for (int i = 0; i < 3; ++i)
       for (int k = 0; k < 3; ++k) dS[3 * i + k] = Wm[i] * dVW[k] + Wm[3 + i] * dVW[3 + k] + Wm[6 + i] * dVW[6 + k];
@@ -277,10 +277,10 @@ inline void backward_lanes(const LaneCamera& c, const LaneGaussians& g, const La
     const bool finite_m = m < INFINITY;
     const float w = r.q[0][l], qx = r.q[1][l], qy = r.q[2][l], qz = r.q[3][l];
     const float dq0 = 2 * (-qz * dR[1] + qy * dR[2] + qz * dR[3] - qx * dR[5] - qy * dR[6] + qx * dR[7]);
-    const float dq1 = 2 * (qy * dR[1] + qz * dR[2] + qy * dR[3] - 2 * qx * dR[4] - w * dR[5] + qz * dR[6] +
-                           w * dR[7] - 2 * qx * dR[8]);
-    const float dq2 = 2 * (-2 * qy * dR[0] + qx * dR[1] + w * dR[2] + qx * dR[3] + qz * dR[5] - w * dR[6] +
-                           qz * dR[7] - 2 * qy * dR[8]);
+    const float dq1 = 2 * (qy * dR[1] + qz * dR[2] + qy * dR[3] - 2 * qx * dR[4] - w * dR[5] + qz * dR[6] + w * dR[7] -
+                           2 * qx * dR[8]);
+    const float dq2 = 2 * (-2 * qy * dR[0] + qx * dR[1] + w * dR[2] + qx * dR[3] + qz * dR[5] - w * dR[6] + qz * dR[7] -
+                           2 * qy * dR[8]);
     const float dq3 = 2 * (-2 * qz * dR[0] - w * dR[1] + qx * dR[2] + w * dR[3] - 2 * qz * dR[4] + qy * dR[5] +
                            qx * dR[6] + qy * dR[7]);
     // |q| = m·|q/m| (m > 0), never below kMinQuatNorm; an infinite component: no gradient.

@@ -16,9 +16,8 @@ bool cpu_supports(KernelIsa isa) {
     case KernelIsa::Avx2:
       return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
     case KernelIsa::Avx512:
-      return cpu_supports(KernelIsa::Avx2) && __builtin_cpu_supports("avx512f") &&
-             __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw") &&
-             __builtin_cpu_supports("avx512dq");
+      return cpu_supports(KernelIsa::Avx2) && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+             __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
 #else
     case KernelIsa::Avx2:
     case KernelIsa::Avx512:
@@ -42,10 +41,14 @@ KernelIsa resolve_kernel_isa(KernelIsa isa) {
 
 const char* kernel_isa_name(KernelIsa isa) {
   switch (isa) {
-    case KernelIsa::Auto: return "auto";
-    case KernelIsa::Portable: return "portable";
-    case KernelIsa::Avx2: return "avx2";
-    case KernelIsa::Avx512: return "avx512";
+    case KernelIsa::Auto:
+      return "auto";
+    case KernelIsa::Portable:
+      return "portable";
+    case KernelIsa::Avx2:
+      return "avx2";
+    case KernelIsa::Avx512:
+      return "avx512";
   }
   return "?";
 }
@@ -61,11 +64,15 @@ namespace raster {
 const TileKernels& tile_kernels(KernelIsa resolved) {
   switch (resolved) {
 #if DESPLAT_X86_KERNELS
-    case KernelIsa::Avx512: return avx512::kTileKernels;
-    case KernelIsa::Avx2: return avx2::kTileKernels;
+    case KernelIsa::Avx512:
+      return avx512::kTileKernels;
+    case KernelIsa::Avx2:
+      return avx2::kTileKernels;
 #endif
-    case KernelIsa::Portable: return portable::kTileKernels;
-    default: break;
+    case KernelIsa::Portable:
+      return portable::kTileKernels;
+    default:
+      break;
   }
   throw std::logic_error(std::string("tile_kernels: no compiled path for '") + kernel_isa_name(resolved) + "'");
 }

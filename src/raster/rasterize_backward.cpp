@@ -17,10 +17,9 @@
 namespace desplat {
 using namespace raster;
 
-void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSettings& s,
-                        const RasterOutput& fw, std::span<const float> dL_dcolor,
-                        std::span<const float> dL_dalpha, std::span<const float> dL_ddepth,
-                        RasterGradients& grads, std::span<const float> rgb_scale) {
+void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSettings& s, const RasterOutput& fw,
+                        std::span<const float> dL_dcolor, std::span<const float> dL_dalpha,
+                        std::span<const float> dL_ddepth, RasterGradients& grads, std::span<const float> rgb_scale) {
   g.validate();
   cam.validate();
   const size_t n = g.size();
@@ -29,8 +28,8 @@ void rasterize_backward(const GaussianView& g, const Camera& cam, const RasterSe
     throw std::invalid_argument("rasterize_backward: forward output does not match the camera or Gaussians");
   auto check = [](std::span<const float> v, size_t expect, const char* name) {
     if (!v.empty() && v.size() != expect)
-      throw std::invalid_argument(std::string("rasterize_backward: ") + name + " has " +
-                                  std::to_string(v.size()) + " values, expected " + std::to_string(expect));
+      throw std::invalid_argument(std::string("rasterize_backward: ") + name + " has " + std::to_string(v.size()) +
+                                  " values, expected " + std::to_string(expect));
   };
   check(dL_dcolor, 3 * pixels, "dL_dcolor");
   check(dL_dalpha, pixels, "dL_dalpha");

@@ -22,16 +22,15 @@ int effective_sh_degree(const GaussianView& g, const RasterSettings& s) {
   if (g.color_mode == ColorMode::RGB) return 0;
   const int d = s.active_sh_degree < 0 ? g.sh_degree : s.active_sh_degree;
   if (d > g.sh_degree)
-    throw std::invalid_argument("active SH degree " + std::to_string(d) +
-                                " exceeds the stored SH degree " + std::to_string(g.sh_degree));
+    throw std::invalid_argument("active SH degree " + std::to_string(d) + " exceeds the stored SH degree " +
+                                std::to_string(g.sh_degree));
   return d;
 }
 
 // Projection, culling, color and opacity for every Gaussian (docs/METHOD.md §3). The
 // geometry runs kLanes Gaussians at a time in vector lanes (gaussian_lanes.hpp); colour,
 // opacity and the blend box follow per visible Gaussian.
-void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& s, int sh_degree,
-                RasterOutput& out) {
+void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& s, int sh_degree, RasterOutput& out) {
   const int64_t n = static_cast<int64_t>(g.size());
   const PinholeIntrinsics K{cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height};
   const LaneCamera lane_cam(cam.R_cw.data(), cam.t_cw.data(), K, s.eps2d, s.near_plane, s.far_plane);
@@ -48,7 +47,8 @@ void preprocess(const GaussianView& g, const Camera& cam, const RasterSettings& 
     LaneGaussians in;
     for (int l = 0; l < kLanes; ++l) {
       const int64_t i = i0 + std::min(l, lanes - 1);
-      for (int k = 0; k < 3; ++k) in.mean[k][l] = g.means[3 * i + k], in.scale[k][l] = std::exp(g.log_scales[3 * i + k]);
+      for (int k = 0; k < 3; ++k)
+        in.mean[k][l] = g.means[3 * i + k], in.scale[k][l] = std::exp(g.log_scales[3 * i + k]);
       for (int k = 0; k < 4; ++k) in.quat[k][l] = g.quats[4 * i + k];
       if (l >= lanes) in.mean[2][l] = NAN;  // padding: never visible
     }

@@ -13,14 +13,13 @@ Vec4<float> quat_vjp(const float* q_raw, const Mat3<float>& G) {
   const float w = q[0], x = q[1], y = q[2], z = q[3];
   // ∂L/∂q̂ from the partial derivatives of each rotation-matrix entry.
   Vec4<float> dq;
-  dq[0] = 2 * (-z * G(0, 1) + y * G(0, 2) + z * G(1, 0) - x * G(1, 2) - y * G(2, 0) +
-               x * G(2, 1));
-  dq[1] = 2 * (y * G(0, 1) + z * G(0, 2) + y * G(1, 0) - 2 * x * G(1, 1) - w * G(1, 2) +
-               z * G(2, 0) + w * G(2, 1) - 2 * x * G(2, 2));
-  dq[2] = 2 * (-2 * y * G(0, 0) + x * G(0, 1) + w * G(0, 2) + x * G(1, 0) + z * G(1, 2) -
-               w * G(2, 0) + z * G(2, 1) - 2 * y * G(2, 2));
-  dq[3] = 2 * (-2 * z * G(0, 0) - w * G(0, 1) + x * G(0, 2) + w * G(1, 0) - 2 * z * G(1, 1) +
-               y * G(1, 2) + x * G(2, 0) + y * G(2, 1));
+  dq[0] = 2 * (-z * G(0, 1) + y * G(0, 2) + z * G(1, 0) - x * G(1, 2) - y * G(2, 0) + x * G(2, 1));
+  dq[1] = 2 * (y * G(0, 1) + z * G(0, 2) + y * G(1, 0) - 2 * x * G(1, 1) - w * G(1, 2) + z * G(2, 0) + w * G(2, 1) -
+               2 * x * G(2, 2));
+  dq[2] = 2 * (-2 * y * G(0, 0) + x * G(0, 1) + w * G(0, 2) + x * G(1, 0) + z * G(1, 2) - w * G(2, 0) + z * G(2, 1) -
+               2 * y * G(2, 2));
+  dq[3] = 2 * (-2 * z * G(0, 0) - w * G(0, 1) + x * G(0, 2) + w * G(1, 0) - 2 * z * G(1, 1) + y * G(1, 2) +
+               x * G(2, 0) + y * G(2, 1));
   // Through q̂ = q / |q|: (I − q̂ q̂ᵀ) ∂L/∂q̂ / |q|.
   float norm = 0;
   if (m > 0) {
@@ -30,8 +29,8 @@ Vec4<float> quat_vjp(const float* q_raw, const Mat3<float>& G) {
   return (dq - q * q.dot(dq)) / std::max(norm, kMinQuatNorm);
 }
 
-void covariance_3d_vjp(const float* log_scale, const float* quat, const Mat3<float>& dSigma,
-                       float* d_log_scale, float* d_quat) {
+void covariance_3d_vjp(const float* log_scale, const float* quat, const Mat3<float>& dSigma, float* d_log_scale,
+                       float* d_quat) {
   const Mat3<float> R = rotation_from_unit_quat<float>(normalize_quat<float>(quat));
   const Vec3<float> S(std::exp(log_scale[0]), std::exp(log_scale[1]), std::exp(log_scale[2]));
   const Mat3<float> M = R * S.asDiagonal();
@@ -44,8 +43,8 @@ void covariance_3d_vjp(const float* log_scale, const float* quat, const Mat3<flo
 }
 
 void project_ewa_vjp(const Vec3<float>& p, const Mat3<float>& V, const PinholeIntrinsics& K,
-                     const Vec2<float>& d_mean2d, const Mat2<float>& d_cov2d, float d_depth,
-                     Vec3<float>& d_p, Mat3<float>& d_V) {
+                     const Vec2<float>& d_mean2d, const Mat2<float>& d_cov2d, float d_depth, Vec3<float>& d_p,
+                     Mat3<float>& d_V) {
   const float x = p[0], y = p[1], z = p[2];
   const float rz = 1.0f / z, rz2 = rz * rz, rz3 = rz2 * rz;
   const FovLimits lim = fov_limits(K);
@@ -97,10 +96,9 @@ namespace {
 // ∇Y_k with respect to the unit direction, for k < (degree + 1)².
 void sh_basis_gradient(int degree, const Vec3<float>& d, Vec3<float>* dY) {
   const float x = d[0], y = d[1], z = d[2];
-  constexpr float C1 = 0.48860251190292f, A = 1.092548430592079f, B = 0.9461746957575601f,
-                  H = 0.5462742152960749f, P = -0.5900435899266435f, Q = 2.890611442640554f,
-                  E = -2.285228997322329f, F = 0.4570457994644658f, Gc = 1.865881662950577f,
-                  I = 1.119528997770346f, R = 1.445305721320277f;
+  constexpr float C1 = 0.48860251190292f, A = 1.092548430592079f, B = 0.9461746957575601f, H = 0.5462742152960749f,
+                  P = -0.5900435899266435f, Q = 2.890611442640554f, E = -2.285228997322329f, F = 0.4570457994644658f,
+                  Gc = 1.865881662950577f, I = 1.119528997770346f, R = 1.445305721320277f;
   dY[0] = Vec3<float>::Zero();
   if (degree < 1) return;
   dY[1] = {0, -C1, 0};
@@ -124,9 +122,8 @@ void sh_basis_gradient(int degree, const Vec3<float>& d, Vec3<float>* dY) {
 }
 }  // namespace
 
-void evaluate_color_sh_vjp(int degree, const float* coeffs, const Vec3<float>& mean,
-                           const Vec3<float>& cam_center, const Vec3<float>& d_color,
-                           float* d_coeffs, Vec3<float>& d_mean) {
+void evaluate_color_sh_vjp(int degree, const float* coeffs, const Vec3<float>& mean, const Vec3<float>& cam_center,
+                           const Vec3<float>& d_color, float* d_coeffs, Vec3<float>& d_mean) {
   const Vec3<float> v = mean - cam_center;
   const float n = v.norm();
   const Vec3<float> dir = n > 0 ? Vec3<float>(v / n) : Vec3<float>(0, 0, 1);

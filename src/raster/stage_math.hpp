@@ -18,17 +18,29 @@ namespace desplat::raster {
 // built with contraction on, and the α of a Gaussian at a pixel must come out bit-identical
 // in the forward and the backward pass, so the α path spells its fusions out instead of
 // leaving them to the compiler (which fuses a product only where it has a single use).
-template <typename T> T madd(T a, T b, T c) { return a * b + c; }
+template <typename T>
+T madd(T a, T b, T c) {
+  return a * b + c;
+}
 #ifdef __FMA__
-template <> inline float madd(float a, float b, float c) { return std::fma(a, b, c); }
+template <>
+inline float madd(float a, float b, float c) {
+  return std::fma(a, b, c);
+}
 #endif
 
-template <typename T> using Vec2 = Eigen::Matrix<T, 2, 1>;
-template <typename T> using Vec3 = Eigen::Matrix<T, 3, 1>;
-template <typename T> using Vec4 = Eigen::Matrix<T, 4, 1>;
-template <typename T> using Mat2 = Eigen::Matrix<T, 2, 2>;
-template <typename T> using Mat3 = Eigen::Matrix<T, 3, 3>;
-template <typename T> using Mat23 = Eigen::Matrix<T, 2, 3>;
+template <typename T>
+using Vec2 = Eigen::Matrix<T, 2, 1>;
+template <typename T>
+using Vec3 = Eigen::Matrix<T, 3, 1>;
+template <typename T>
+using Vec4 = Eigen::Matrix<T, 4, 1>;
+template <typename T>
+using Mat2 = Eigen::Matrix<T, 2, 2>;
+template <typename T>
+using Mat3 = Eigen::Matrix<T, 3, 3>;
+template <typename T>
+using Mat23 = Eigen::Matrix<T, 2, 3>;
 
 constexpr float kAlphaMax = 0.999f;
 constexpr float kAlphaMin = 1.0f / 255.0f;
@@ -53,7 +65,8 @@ constexpr float kMaxRadius = 1 << 20;
 constexpr float kMinQuatNorm = 1e-8f;
 
 // --- opacity -------------------------------------------------------------------
-template <typename T> T sigmoid(T x) {
+template <typename T>
+T sigmoid(T x) {
   using std::exp;
   if (x >= T(0)) return T(1) / (T(1) + exp(-x));
   const T e = exp(x);
@@ -63,7 +76,8 @@ template <typename T> T sigmoid(T x) {
 // --- rotation from quaternion (w, x, y, z) ----------------------------------------
 // Normalizes after dividing by the largest component, so denormal quaternions keep
 // their direction; an all-zero (or non-finite) quaternion maps to the identity.
-template <typename T> Vec4<T> normalize_quat(const T* q) {
+template <typename T>
+Vec4<T> normalize_quat(const T* q) {
   using std::abs;
   using std::sqrt;
   T m = abs(q[0]);
@@ -73,12 +87,13 @@ template <typename T> Vec4<T> normalize_quat(const T* q) {
   return u / sqrt(u.squaredNorm());
 }
 
-template <typename T> Mat3<T> rotation_from_unit_quat(const Vec4<T>& q) {
+template <typename T>
+Mat3<T> rotation_from_unit_quat(const Vec4<T>& q) {
   const T w = q[0], x = q[1], y = q[2], z = q[3];
   Mat3<T> R;
-  R << T(1) - T(2) * (y * y + z * z), T(2) * (x * y - w * z), T(2) * (x * z + w * y),
-       T(2) * (x * y + w * z), T(1) - T(2) * (x * x + z * z), T(2) * (y * z - w * x),
-       T(2) * (x * z - w * y), T(2) * (y * z + w * x), T(1) - T(2) * (x * x + y * y);
+  R << T(1) - T(2) * (y * y + z * z), T(2) * (x * y - w * z), T(2) * (x * z + w * y), T(2) * (x * y + w * z),
+      T(1) - T(2) * (x * x + z * z), T(2) * (y * z - w * x), T(2) * (x * z - w * y), T(2) * (y * z + w * x),
+      T(1) - T(2) * (x * x + y * y);
   return R;
 }
 
@@ -86,7 +101,8 @@ template <typename T> Mat3<T> rotation_from_unit_quat(const Vec4<T>& q) {
 Vec4<float> quat_vjp(const float* q_raw, const Mat3<float>& dR);
 
 // --- 3D covariance Σ = R S Sᵀ Rᵀ, S = diag(exp(s)) ---------------------------------
-template <typename T> Mat3<T> covariance_3d(const T* log_scale, const T* quat) {
+template <typename T>
+Mat3<T> covariance_3d(const T* log_scale, const T* quat) {
   using std::exp;
   const Mat3<T> R = rotation_from_unit_quat<T>(normalize_quat<T>(quat));
   Mat3<T> M = R;
@@ -95,8 +111,8 @@ template <typename T> Mat3<T> covariance_3d(const T* log_scale, const T* quat) {
 }
 
 // ∂L/∂s and ∂L/∂q from ∂L/∂Σ (full 3×3 gradient; symmetrized here).
-void covariance_3d_vjp(const float* log_scale, const float* quat, const Mat3<float>& dSigma,
-                       float* d_log_scale, float* d_quat);
+void covariance_3d_vjp(const float* log_scale, const float* quat, const Mat3<float>& dSigma, float* d_log_scale,
+                       float* d_quat);
 
 // --- EWA projection ----------------------------------------------------------------
 struct PinholeIntrinsics {
@@ -116,7 +132,8 @@ inline FovLimits fov_limits(const PinholeIntrinsics& K) {
           (K.height - K.cy) / K.fy + 0.3 * tan_fovy, K.cy / K.fy + 0.3 * tan_fovy};
 }
 
-template <typename T> struct Projection {
+template <typename T>
+struct Projection {
   Vec2<T> mean2d;  // [px]
   Mat2<T> cov2d;   // with the eps2d blur [px²]
   T depth;         // camera z
@@ -125,8 +142,7 @@ template <typename T> struct Projection {
 // Camera-space point p, camera-space covariance V. Caller culls p.z outside
 // (near, far) first.
 template <typename T>
-Projection<T> project_ewa(const Vec3<T>& p, const Mat3<T>& V, const PinholeIntrinsics& K,
-                          float eps2d) {
+Projection<T> project_ewa(const Vec3<T>& p, const Mat3<T>& V, const PinholeIntrinsics& K, float eps2d) {
   const T x = p[0], y = p[1], z = p[2];
   const T rz = T(1) / z;
   const FovLimits lim = fov_limits(K);
@@ -135,8 +151,7 @@ Projection<T> project_ewa(const Vec3<T>& p, const Mat3<T>& V, const PinholeIntri
   const T tx = z * std::min(lim_x_pos, std::max(T(-lim_x_neg), T(x * rz)));
   const T ty = z * std::min(lim_y_pos, std::max(T(-lim_y_neg), T(y * rz)));
   Mat23<T> J;
-  J << T(K.fx) * rz, T(0), T(-K.fx) * tx * rz * rz,
-       T(0), T(K.fy) * rz, T(-K.fy) * ty * rz * rz;
+  J << T(K.fx) * rz, T(0), T(-K.fx) * tx * rz * rz, T(0), T(K.fy) * rz, T(-K.fy) * ty * rz * rz;
   Projection<T> out;
   out.cov2d = J * V * J.transpose();
   out.cov2d(0, 0) += T(eps2d);
@@ -148,11 +163,12 @@ Projection<T> project_ewa(const Vec3<T>& p, const Mat3<T>& V, const PinholeIntri
 
 // ∂L/∂p and ∂L/∂V from ∂L/∂mean2d, ∂L/∂cov2d (full 2×2) and ∂L/∂depth.
 void project_ewa_vjp(const Vec3<float>& p, const Mat3<float>& V, const PinholeIntrinsics& K,
-                     const Vec2<float>& d_mean2d, const Mat2<float>& d_cov2d, float d_depth,
-                     Vec3<float>& d_p, Mat3<float>& d_V);
+                     const Vec2<float>& d_mean2d, const Mat2<float>& d_cov2d, float d_depth, Vec3<float>& d_p,
+                     Mat3<float>& d_V);
 
 // Conic (a, b, c) = entries (0,0), (0,1), (1,1) of cov2d⁻¹.
-template <typename T> Vec3<T> conic_from_cov2d(const Mat2<T>& cov, T* det_out = nullptr) {
+template <typename T>
+Vec3<T> conic_from_cov2d(const Mat2<T>& cov, T* det_out = nullptr) {
   const T det = cov(0, 0) * cov(1, 1) - cov(0, 1) * cov(1, 0);
   if (det_out) *det_out = det;
   const T inv = T(1) / det;
@@ -164,25 +180,29 @@ Mat2<float> conic_vjp(const Vec3<float>& conic, const Vec3<float>& d_conic);
 
 // --- per-pixel falloff -----------------------------------------------------------
 // d = μ2d − pixel center.
-template <typename T> T gaussian_sigma(T a, T b, T c, T dx, T dy) {
+template <typename T>
+T gaussian_sigma(T a, T b, T c, T dx, T dy) {
   // ½a·dx² + ½c·dy² + b·dx·dy, every product fused into the next sum (madd).
   return madd(T(0.5) * a * dx, dx, madd(T(0.5) * c * dy, dy, b * dx * dy));
 }
 
 // α = min(0.999, o·exp(−σ)) given o·exp(−σ); written as a value select (std::min
 // returns a reference, which keeps GCC from vectorizing the pixel loops).
-template <typename T> T clamp_alpha(T raw) { return raw < T(kAlphaMax) ? raw : T(kAlphaMax); }
+template <typename T>
+T clamp_alpha(T raw) {
+  return raw < T(kAlphaMax) ? raw : T(kAlphaMax);
+}
 
 // --- spherical harmonics (core/spherical_harmonics.hpp; degree ≤ 3 here) ------------
-template <typename T> void sh_basis(int degree, const Vec3<T>& d, T* Y) {
+template <typename T>
+void sh_basis(int degree, const Vec3<T>& d, T* Y) {
   desplat::sh_basis<T>(degree, d[0], d[1], d[2], Y);
 }
 
 // The color of one Gaussian before clamping: SH mode Σ_k c_k Y_k(dir) + 0.5 with
 // dir = normalize(mean − cam_center); RGB mode the stored value.
 template <typename T>
-Vec3<T> evaluate_color(bool sh_mode, int degree, const T* coeffs, const Vec3<T>& mean,
-                       const Vec3<T>& cam_center) {
+Vec3<T> evaluate_color(bool sh_mode, int degree, const T* coeffs, const Vec3<T>& mean, const Vec3<T>& cam_center) {
   if (!sh_mode) return Vec3<T>(coeffs[0], coeffs[1], coeffs[2]);
   using std::sqrt;
   Vec3<T> dir = mean - cam_center;
@@ -197,8 +217,7 @@ Vec3<T> evaluate_color(bool sh_mode, int degree, const T* coeffs, const Vec3<T>&
 }
 
 // Accumulates ∂L/∂coeffs and ∂L/∂mean (through dir) from ∂L/∂color (unclamped).
-void evaluate_color_sh_vjp(int degree, const float* coeffs, const Vec3<float>& mean,
-                           const Vec3<float>& cam_center, const Vec3<float>& d_color,
-                           float* d_coeffs, Vec3<float>& d_mean);
+void evaluate_color_sh_vjp(int degree, const float* coeffs, const Vec3<float>& mean, const Vec3<float>& cam_center,
+                           const Vec3<float>& d_color, float* d_coeffs, Vec3<float>& d_mean);
 
 }  // namespace desplat::raster

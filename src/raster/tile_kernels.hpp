@@ -20,14 +20,20 @@ struct TileKernels {
   // Back-to-front walk of one tile: one kEntrySlots record per tile entry in entry_grads, at
   // the entry's record_of_entry (grouped by Gaussian, so each Gaussian's sum reads them in a run).
   // dC [H,W,3], dA and dD [H,W] may be null (zero).
-  void (*backward_tile)(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                        const float* dA, const float* dD, float* entry_grads);
+  void (*backward_tile)(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC, const float* dA,
+                        const float* dD, float* entry_grads);
 };
 
-namespace portable { extern const TileKernels kTileKernels; }
+namespace portable {
+extern const TileKernels kTileKernels;
+}
 #if DESPLAT_X86_KERNELS
-namespace avx2 { extern const TileKernels kTileKernels; }
-namespace avx512 { extern const TileKernels kTileKernels; }
+namespace avx2 {
+extern const TileKernels kTileKernels;
+}
+namespace avx512 {
+extern const TileKernels kTileKernels;
+}
 #endif
 
 // The kernels of a resolved path (not Auto); throws std::logic_error for a path this build

@@ -41,8 +41,12 @@ constexpr int kSplatPrefetch = 2;
     a[2 * i + 1] = _mm512_unpackhi_ps(r[2 * i], r[2 * i + 1]);
   }
   for (int i = 0; i < 4; ++i) {  // 64-bit interleave: lane k of b[4i + j] = column 4k + j, rows 4i..4i+3
-    auto lo = [](__m512 x, __m512 y) { return _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(x), _mm512_castps_pd(y))); };
-    auto hi = [](__m512 x, __m512 y) { return _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(x), _mm512_castps_pd(y))); };
+    auto lo = [](__m512 x, __m512 y) {
+      return _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(x), _mm512_castps_pd(y)));
+    };
+    auto hi = [](__m512 x, __m512 y) {
+      return _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(x), _mm512_castps_pd(y)));
+    };
     b[4 * i + 0] = lo(a[4 * i], a[4 * i + 2]);
     b[4 * i + 1] = hi(a[4 * i], a[4 * i + 2]);
     b[4 * i + 2] = lo(a[4 * i + 1], a[4 * i + 3]);
@@ -51,7 +55,8 @@ constexpr int kSplatPrefetch = 2;
   __m512 column[16];
   for (int j = 0; j < 4; ++j) {  // gather lane k of the four row groups: column 4k + j
     const __m512 g0 = _mm512_shuffle_f32x4(b[j], b[4 + j], 0x88), g1 = _mm512_shuffle_f32x4(b[j], b[4 + j], 0xDD);
-    const __m512 g2 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0x88), g3 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0xDD);
+    const __m512 g2 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0x88),
+                 g3 = _mm512_shuffle_f32x4(b[8 + j], b[12 + j], 0xDD);
     column[j] = _mm512_shuffle_f32x4(g0, g2, 0x88);
     column[8 + j] = _mm512_shuffle_f32x4(g0, g2, 0xDD);
     column[4 + j] = _mm512_shuffle_f32x4(g1, g3, 0x88);
@@ -204,8 +209,8 @@ int64_t blend_tile(const TileGrid& grid, int tile, RasterOutput& out) {
 // no depth gradient; without one (kWithDepth false) the depth term and its per-column sum are
 // left out of the pixel loop instead of adding zeros (the kZ slot stays +0, as the zeros gave).
 template <bool kWithDepth>
-void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                        const float* dA, const float* dD, float* entry_grads) {
+void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC, const float* dA,
+                        const float* dD, float* entry_grads) {
   constexpr int S = kTileSize;
   const int x0 = (tile % grid.tiles_x) * S, y0 = (tile / grid.tiles_x) * S;
   const int cols = std::min(S, fw.width - x0), rows = std::min(S, fw.height - y0);
@@ -315,8 +320,8 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
           const float w = hit * alpha * t_before;
           // ∂C/∂α = c·T − (blended behind)/(1 − α) per channel, ∂A/∂α = T_final/(1 − α):
           // ∂L/∂α = T·(c·∂L/∂C + z·∂L/∂D) + Q/(1 − α).
-          const float dot = kWithDepth ? cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j]
-                                       : cr * gr[j] + cg * gg[j] + cb * gb[j];
+          const float dot =
+              kWithDepth ? cr * gr[j] + cg * gg[j] + cb * gb[j] + z * gd[j] : cr * gr[j] + cg * gg[j] + cb * gb[j];
           const float d_alpha = t_before * dot + ra * Q[j];
           const float unclamped = o * vis <= kAlphaMax ? hit : 0.0f;
           const float d_sigma = -unclamped * d_alpha * o * vis;
@@ -350,8 +355,8 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
   }
 }
 
-void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC,
-                   const float* dA, const float* dD, float* entry_grads) {
+void backward_tile(const TileGrid& grid, int tile, const RasterOutput& fw, const float* dC, const float* dA,
+                   const float* dD, float* entry_grads) {
   if (dD)
     backward_tile_walk<true>(grid, tile, fw, dC, dA, dD, entry_grads);
   else

@@ -125,8 +125,6 @@ class RowChords {
   float slope_ = 0, curvature_ = 0, reach_ = 0, centre_ = 0, pad_ = 0;
 };
 
-inline int thread_count(const RasterSettings& s) {
-  return s.num_threads > 0 ? s.num_threads : omp_get_max_threads();
-}
+inline int thread_count(const RasterSettings& s) { return s.num_threads > 0 ? s.num_threads : omp_get_max_threads(); }
 
 }  // namespace desplat::raster

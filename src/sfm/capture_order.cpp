@@ -99,8 +99,8 @@ CaptureOrder judge_capture_order(const std::vector<std::vector<float>>& thumbnai
   std::snprintf(buf, sizeof buf,
                 "photos next to each other in file-name order differ by %.3f, photos half the capture apart by "
                 "%.3f (ratio %.2f; in order below %.2f)",
-                r.neighbour_distance, r.far_distance,
-                r.far_distance > 0 ? r.neighbour_distance / r.far_distance : 1.0, kOrderedDistanceRatio);
+                r.neighbour_distance, r.far_distance, r.far_distance > 0 ? r.neighbour_distance / r.far_distance : 1.0,
+                kOrderedDistanceRatio);
   r.reason = std::string(r.ordered ? "taken in order: " : "not in file-name order: ") + buf;
   return r;
 }

@@ -33,11 +33,22 @@ void finish_stage(Context& c, const std::string& command, const StageOutput& s) 
 std::vector<std::string> extract_args(const SfmOptions& o, const Layout& l, const Workspace& w, bool single_camera,
                                       const std::vector<std::string>& extra) {
   const std::string model = o.camera_model.empty() ? auto_camera_model(single_camera) : o.camera_model;
-  std::vector<std::string> a = {"--database_path", w.database.string(), "--image_path", l.images.string(),
-                                "--image_list_path", l.image_list.string(), "--ImageReader.camera_model",
-                                model, "--ImageReader.single_camera", single_camera ? "1" : "0",
-                                "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads",
-                                threads(o.num_threads), "--log_to_stderr", "1"};
+  std::vector<std::string> a = {"--database_path",
+                                w.database.string(),
+                                "--image_path",
+                                l.images.string(),
+                                "--image_list_path",
+                                l.image_list.string(),
+                                "--ImageReader.camera_model",
+                                model,
+                                "--ImageReader.single_camera",
+                                single_camera ? "1" : "0",
+                                "--SiftExtraction.use_gpu",
+                                "0",
+                                "--SiftExtraction.num_threads",
+                                threads(o.num_threads),
+                                "--log_to_stderr",
+                                "1"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
@@ -47,8 +58,14 @@ int exhaustive_block_size(int num_photos) { return std::clamp((num_photos + 4) /
 
 std::vector<std::string> match_args(const SfmOptions& o, const Workspace& w, Matcher m, int num_photos,
                                     const std::vector<std::string>& extra) {
-  std::vector<std::string> a = {"--database_path", w.database.string(), "--SiftMatching.use_gpu", "0",
-                                "--SiftMatching.num_threads", threads(o.num_threads), "--log_to_stderr", "1"};
+  std::vector<std::string> a = {"--database_path",
+                                w.database.string(),
+                                "--SiftMatching.use_gpu",
+                                "0",
+                                "--SiftMatching.num_threads",
+                                threads(o.num_threads),
+                                "--log_to_stderr",
+                                "1"};
   if (m == Matcher::Exhaustive)
     a.insert(a.end(), {"--ExhaustiveMatching.block_size", std::to_string(exhaustive_block_size(num_photos))});
   a.insert(a.end(), extra.begin(), extra.end());
@@ -80,11 +97,14 @@ StageOutput run_stage(Context& c, SfmStage stage, const std::string& command, st
   const Stopwatch clock;
   out.time_limit = c.time_limit(stage);
   try {
-    out.exit = run_subprocess(args, [&](std::string_view chunk) {
-      c.log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-      c.log.flush();  // so `tail -f colmap.log` follows along
-      lines.feed(chunk, on_line);
-    }, out.time_limit);
+    out.exit = run_subprocess(
+        args,
+        [&](std::string_view chunk) {
+          c.log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+          c.log.flush();  // so `tail -f colmap.log` follows along
+          lines.feed(chunk, on_line);
+        },
+        out.time_limit);
   } catch (const SubprocessError& e) {
     fail(SfmErrorKind::StageFailed, e.what());
   }
@@ -135,10 +155,18 @@ std::string threads(int n) { return std::to_string(n); }
 // partial model so the user hears "only N of M" (and can accept it) instead of "no model".
 std::vector<std::string> map_args(const SfmOptions& o, const Layout& l, const Workspace& w, int min_registered,
                                   const std::vector<std::string>& extra) {
-  std::vector<std::string> a = {"--database_path", w.database.string(), "--image_path", l.images.string(),
-                                "--output_path", w.sparse_root.string(), "--Mapper.num_threads",
-                                threads(o.num_threads), "--Mapper.min_model_size",
-                                std::to_string(std::min(min_registered, 3)), "--log_to_stderr", "1"};
+  std::vector<std::string> a = {"--database_path",
+                                w.database.string(),
+                                "--image_path",
+                                l.images.string(),
+                                "--output_path",
+                                w.sparse_root.string(),
+                                "--Mapper.num_threads",
+                                threads(o.num_threads),
+                                "--Mapper.min_model_size",
+                                std::to_string(std::min(min_registered, 3)),
+                                "--log_to_stderr",
+                                "1"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }

@@ -23,8 +23,9 @@ namespace {
 // shared features have no such pair. A third to a half of each still leaves tens of inliers,
 // far above the 5 a two-view pose needs, so a wrong start stays unlikely (the reprojection
 // error of the result is reported).
-const std::vector<std::string> kRelaxedMapper = {"--Mapper.init_min_num_inliers", "30", "--Mapper.init_min_tri_angle",
-                                                 "4", "--Mapper.abs_pose_min_num_inliers", "15"};
+const std::vector<std::string> kRelaxedMapper = {"--Mapper.init_min_num_inliers",     "30",
+                                                 "--Mapper.init_min_tri_angle",       "4",
+                                                 "--Mapper.abs_pose_min_num_inliers", "15"};
 // Registering into a finished model uses the same per-photo threshold.
 const std::vector<std::string> kRelaxedRegistration = {"--Mapper.abs_pose_min_num_inliers", "15"};
 // Guided matching re-matches each verified pair along its epipolar geometry, recovering matches
@@ -78,20 +79,20 @@ Candidate register_rest(Context& c, const SfmOptions& o, const Candidate& from, 
   const fs::path model = w.sparse_root / "0";
   std::error_code ec;
   fs::create_directories(model, ec);
-  std::vector<std::string> reg = {"--database_path", w.database.string(), "--input_path",
-                                  from.models[0].dir.string(), "--output_path", model.string(),
-                                  "--Mapper.num_threads", threads(o.num_threads), "--log_to_stderr", "1"};
+  std::vector<std::string> reg = {
+      "--database_path", w.database.string(),    "--input_path",         from.models[0].dir.string(), "--output_path",
+      model.string(),    "--Mapper.num_threads", threads(o.num_threads), "--log_to_stderr",           "1"};
   reg.insert(reg.end(), kRelaxedRegistration.begin(), kRelaxedRegistration.end());
   const StageOutput r = run_stage(c, SfmStage::Map, "image_registrator", std::move(reg), c.num_photos);
   if (!r.exit.ok()) stage_failed(c, "image_registrator", r);
-  const StageOutput ba =
-      run_stage(c, SfmStage::Map, "bundle_adjuster",
-                {"--input_path", model.string(), "--output_path", model.string(), "--log_to_stderr", "1"}, c.num_photos);
+  const StageOutput ba = run_stage(
+      c, SfmStage::Map, "bundle_adjuster",
+      {"--input_path", model.string(), "--output_path", model.string(), "--log_to_stderr", "1"}, c.num_photos);
   if (!ba.exit.ok()) stage_failed(c, "bundle_adjuster", ba);
   Candidate cand{w, collect_models(w.sparse_root)};
   if (!cand.models.empty() && cand.models[0].registered < 0)
-    fail(SfmErrorKind::NoModel, "colmap image_registrator wrote a model that cannot be read: " +
-                                    cand.models[0].error + ". The full output is in " + in_quotes(c.layout.log));
+    fail(SfmErrorKind::NoModel, "colmap image_registrator wrote a model that cannot be read: " + cand.models[0].error +
+                                    ". The full output is in " + in_quotes(c.layout.log));
   return cand;
 }
 
@@ -117,10 +118,10 @@ fs::path Ladder::step_folder(const std::string& name) const {
 }
 
 void Ladder::record(const std::string& step, const std::vector<std::string>& settings, const Candidate& cand,
-            double seconds) {
+                    double seconds) {
   attempts.push_back({step, joined(settings), cand.registered(), cand.points(), seconds});
-  c.log << "\n######## desplat_sfm: step '" << step << "' (" << joined(settings) << "): " << cand.registered()
-        << " of " << c.num_photos << " photos, " << cand.points() << " points, " << seconds << " s\n"
+  c.log << "\n######## desplat_sfm: step '" << step << "' (" << joined(settings) << "): " << cand.registered() << " of "
+        << c.num_photos << " photos, " << cand.points() << " points, " << seconds << " s\n"
         << std::flush;
   if (better(cand, best)) best = cand;
 }
@@ -132,8 +133,8 @@ void Ladder::first_run(const std::string& camera_text) {
   match_seconds = run_matching(c, o, w, {}).seconds;
   best = run_mapper(c, o, w, min_registered, {}, &last_map);
   map_seconds = last_map.seconds;
-  attempts.push_back({"colmap defaults", camera_text + ", " + matcher_name(c.matcher) + " matching",
-                      best.registered(), best.points(), clock.seconds()});
+  attempts.push_back({"colmap defaults", camera_text + ", " + matcher_name(c.matcher) + " matching", best.registered(),
+                      best.points(), clock.seconds()});
 }
 
 void Ladder::relaxed_mapper() {
@@ -152,7 +153,8 @@ void Ladder::register_the_rest() {
 
 // Guided matching and the relaxed mapper, on a copy of the first run's features or, with
 // `new_features`, on features extracted again with those options.
-void Ladder::match_again(const char* step, const std::string& folder_name, const std::vector<std::string>* new_features) {
+void Ladder::match_again(const char* step, const std::string& folder_name,
+                         const std::vector<std::string>* new_features) {
   const Stopwatch clock;
   const fs::path folder = step_folder(folder_name);
   const Workspace w{folder / "database.db", folder / "sparse"};
@@ -182,8 +184,8 @@ std::string Ladder::step_name(Step step) {
 }
 
 void Ladder::run() {
-  const Step steps[] = {&Ladder::relaxed_mapper,  &Ladder::register_the_rest, &Ladder::guided_matching,
-                        &Ladder::register_the_rest, &Ladder::more_features,   &Ladder::register_the_rest};
+  const Step steps[] = {&Ladder::relaxed_mapper,    &Ladder::register_the_rest, &Ladder::guided_matching,
+                        &Ladder::register_the_rest, &Ladder::more_features,     &Ladder::register_the_rest};
   for (const Step step : steps) {
     if (enough()) return;
     const size_t before = attempts.size();
@@ -197,14 +199,13 @@ void Ladder::run() {
         throw;
       const std::string what = e.what();
       if (attempts.size() == before) attempts.push_back({step_name(step), "", 0, 0, 0});
-      attempts.back().settings += std::string(attempts.back().settings.empty() ? "" : "; ") +
-                                  "stopped: " + what.substr(0, what.find('\n'));
+      attempts.back().settings +=
+          std::string(attempts.back().settings.empty() ? "" : "; ") + "stopped: " + what.substr(0, what.find('\n'));
       c.log << "\n######## desplat_sfm: escalation stopped: " << what << "\n" << std::flush;
       return;
     }
   }
 }
-
 
 Candidate install_winner(const Context& c, Candidate best) {
   const Layout& l = c.layout;
@@ -214,7 +215,8 @@ Candidate install_winner(const Context& c, Candidate best) {
   fs::create_directories(keep, ec);
   const auto move = [&](const fs::path& from, const fs::path& to) {
     fs::rename(from, to, ec);
-    if (ec) fail(SfmErrorKind::OutputExists, "cannot move " + in_quotes(from) + " to " + in_quotes(to) + ": " + ec.message());
+    if (ec)
+      fail(SfmErrorKind::OutputExists, "cannot move " + in_quotes(from) + " to " + in_quotes(to) + ": " + ec.message());
   };
   move(l.sparse_root, keep / "sparse");
   move(best.where.sparse_root, l.sparse_root);

@@ -9,9 +9,9 @@
 namespace desplat::sfm {
 
 struct MatchEvidence {
-  int features = 0;         // SIFT keypoints colmap extracted
-  int matched_photos = 0;   // photos it shares a geometrically verified pair with
-  int best_inliers = 0;     // the largest verified match count among those pairs
+  int features = 0;        // SIFT keypoints colmap extracted
+  int matched_photos = 0;  // photos it shares a geometrically verified pair with
+  int best_inliers = 0;    // the largest verified match count among those pairs
 };
 
 // Per image name (as colmap stores it: relative to images/). Photos colmap never added to the

@@ -144,26 +144,27 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, con
 }
 
 void check_registered(const Context& c, const std::vector<ModelInfo>& models, const fs::path& database,
-                      int min_registered, const std::vector<fs::path>& photos, const std::vector<SfmAttempt>& attempts) {
+                      int min_registered, const std::vector<fs::path>& photos,
+                      const std::vector<SfmAttempt>& attempts) {
   const ModelInfo& best = models[0];
   if (best.registered >= min_registered) return;
   SfmResult lost;
   lost.num_photos = c.num_photos;
   std::string tried;
-  for (const SfmAttempt& a : attempts) tried += (tried.empty() ? "" : ", ") + a.step + " " + std::to_string(a.registered);
+  for (const SfmAttempt& a : attempts)
+    tried += (tried.empty() ? "" : ", ") + a.step + " " + std::to_string(a.registered);
   lost.unregistered = photos_not_in(models, photos, database);
   std::string names = describe_lost_photos(lost);
   if (!names.empty() && names.back() == '\n') names.pop_back();
-  const std::string accept =
-      best.registered >= 3 ? "; to use it anyway, run again with --overwrite --min-registered-share " +
-                                 share_text(best.registered, c.num_photos)
-                           : "";
+  const std::string accept = best.registered >= 3
+                                 ? "; to use it anyway, run again with --overwrite --min-registered-share " +
+                                       share_text(best.registered, c.num_photos)
+                                 : "";
   fail(SfmErrorKind::TooFewRegistered,
        "only " + std::to_string(best.registered) + " of " + std::to_string(c.num_photos) +
            " photos could be placed (at least " + std::to_string(min_registered) + " needed); " + kPhotoAdvice + "." +
            matcher_hint(c.matcher) + " Photos placed by each step: " + tried + ". The partial model is kept in " +
-           in_quotes(best.dir) + accept +
-           ". Details: " + in_quotes(c.layout.log) + "\n" + names);
+           in_quotes(best.dir) + accept + ". Details: " + in_quotes(c.layout.log) + "\n" + names);
 }
 
 }  // namespace desplat::sfm::pipeline

@@ -40,7 +40,8 @@ PhotoCamera camera_of(const OIIO::ImageSpec& spec) {
 // filled). colmap's reader skips such files quietly or, for a truncated JPEG, reads grey rows;
 // either way the user must hear which file was left out and why.
 std::string photo_problem(const fs::path& p, const fs::path& rel, PhotoCamera* camera) {
-  if (!has_image_extension(p)) return "not a photo (extension is not .jpg, .jpeg, .png, .tif, .tiff, .bmp, .ppm or .pgm)";
+  if (!has_image_extension(p))
+    return "not a photo (extension is not .jpg, .jpeg, .png, .tif, .tiff, .bmp, .ppm or .pgm)";
   if (rel.string().find_first_of("\r\n") != std::string::npos)
     return "its name holds a line break, which colmap's list of images cannot hold; rename it";
   std::error_code ec;
@@ -71,7 +72,8 @@ std::string size_text(const PhotoCamera& c) { return std::to_string(c.width) + "
 PhotoScan scan_photos(const fs::path& dir) {
   std::error_code ec;
   if (!fs::exists(dir, ec))
-    bad_images("the images folder " + in_quotes(dir) + " does not exist; pass the folder that holds your photos with --images");
+    bad_images("the images folder " + in_quotes(dir) +
+               " does not exist; pass the folder that holds your photos with --images");
   if (!fs::is_directory(dir, ec))
     bad_images(in_quotes(dir) + " is not a folder; --images takes the folder that holds your photos");
   std::vector<std::pair<fs::path, PhotoCamera>> photos;
@@ -127,9 +129,12 @@ const char* auto_camera_model(bool single_camera) { return single_camera ? "OPEN
 
 const char* camera_sharing_name(CameraSharing s) {
   switch (s) {
-    case CameraSharing::Auto: return "auto";
-    case CameraSharing::Single: return "single";
-    case CameraSharing::PerPhoto: return "per-photo";
+    case CameraSharing::Auto:
+      return "auto";
+    case CameraSharing::Single:
+      return "single";
+    case CameraSharing::PerPhoto:
+      return "per-photo";
   }
   return "?";
 }

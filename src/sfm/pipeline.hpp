@@ -26,7 +26,11 @@ namespace desplat::sfm::pipeline {
 struct Layout {
   std::filesystem::path out, images, database, sparse_root, log, image_list;
   explicit Layout(const std::filesystem::path& o)
-      : out(o), images(o / "images"), database(o / "database.db"), sparse_root(o / "sparse"), log(o / "colmap.log"),
+      : out(o),
+        images(o / "images"),
+        database(o / "database.db"),
+        sparse_root(o / "sparse"),
+        log(o / "colmap.log"),
         image_list(o / "image_list.txt") {}
 };
 
@@ -150,8 +154,7 @@ struct Ladder {
  private:
   bool enough() const;
   std::filesystem::path step_folder(const std::string& name) const;
-  void record(const std::string& step, const std::vector<std::string>& settings, const Candidate& cand,
-              double seconds);
+  void record(const std::string& step, const std::vector<std::string>& settings, const Candidate& cand, double seconds);
   void relaxed_mapper();
   void register_the_rest();
   void match_again(const char* step, const std::string& folder_name, const std::vector<std::string>* new_features);

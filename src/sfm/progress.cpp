@@ -14,8 +14,14 @@ std::string describe(const SfmProgress& p) {
     if (total > 0) s << "/" << total;
   };
   switch (p.stage) {
-    case SfmStage::Extract: s << "extracting features: image "; count(p.done, p.total); break;
-    case SfmStage::Match: s << "matching: " << p.unit << " "; count(p.done, p.total); break;
+    case SfmStage::Extract:
+      s << "extracting features: image ";
+      count(p.done, p.total);
+      break;
+    case SfmStage::Match:
+      s << "matching: " << p.unit << " ";
+      count(p.done, p.total);
+      break;
     case SfmStage::Map:
       s << "mapping: ";
       if (p.model > 1) s << "model " << p.model << ", ";

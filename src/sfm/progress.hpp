@@ -40,9 +40,12 @@ class ProgressParser {
   // True when the line changed the progress.
   bool feed(std::string_view line) {
     switch (p_.stage) {
-      case SfmStage::Extract: return feed_fraction(line, "Processed file [", "image");
-      case SfmStage::Match: return feed_match(line);
-      case SfmStage::Map: return feed_map(line);
+      case SfmStage::Extract:
+        return feed_fraction(line, "Processed file [", "image");
+      case SfmStage::Match:
+        return feed_match(line);
+      case SfmStage::Map:
+        return feed_map(line);
     }
     return false;
   }

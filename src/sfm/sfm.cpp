@@ -87,10 +87,14 @@ std::optional<Matcher> matcher_from_name(const std::string& name) {
 
 const char* matcher_name(Matcher matcher) {
   switch (matcher) {
-    case Matcher::Auto: return "auto";
-    case Matcher::Exhaustive: return "exhaustive";
-    case Matcher::Sequential: return "sequential";
-    case Matcher::Spatial: return "spatial";
+    case Matcher::Auto:
+      return "auto";
+    case Matcher::Exhaustive:
+      return "exhaustive";
+    case Matcher::Sequential:
+      return "sequential";
+    case Matcher::Spatial:
+      return "spatial";
   }
   return "?";
 }
@@ -107,9 +111,12 @@ int required_registered(double share, int num_images) {
 double default_stage_time_limit(SfmStage stage, Matcher matcher, int num_photos) {
   const double n = std::max(1, num_photos);
   switch (stage) {
-    case SfmStage::Extract: return 300 + 30 * n;
-    case SfmStage::Match: return matcher == Matcher::Exhaustive ? 600 + 3 * n * (n - 1) / 2 : 600 + 60 * n;
-    case SfmStage::Map: return 600 + 60 * n;
+    case SfmStage::Extract:
+      return 300 + 30 * n;
+    case SfmStage::Match:
+      return matcher == Matcher::Exhaustive ? 600 + 3 * n * (n - 1) / 2 : 600 + 60 * n;
+    case SfmStage::Map:
+      return 600 + 60 * n;
   }
   return 0;
 }
@@ -137,8 +144,8 @@ std::string describe_attempts(const SfmResult& r) {
   std::string text = "cameras: " + r.cameras.reason + "\nmatching: " + r.matcher_reason + "\n";
   for (const SfmAttempt& a : r.attempts) {
     char line[160];
-    std::snprintf(line, sizeof line, "  %-18s %d of %d photos, %d points, %.0f s", (a.step + ":").c_str(),
-                  a.registered, r.num_photos, a.points, a.seconds);
+    std::snprintf(line, sizeof line, "  %-18s %d of %d photos, %d points, %.0f s", (a.step + ":").c_str(), a.registered,
+                  r.num_photos, a.points, a.seconds);
     text += line + std::string(" (") + a.settings + ")\n";
   }
   if (!r.warning.empty()) text += "warning: " + r.warning + "\n";
@@ -149,7 +156,8 @@ SfmResult run_sfm(const SfmOptions& o) {
   const Stopwatch clock;
   if (!o.camera_model.empty()) check_camera_model(o.camera_model);
   if (o.stage_time_limit_s && !(*o.stage_time_limit_s > 0))
-    fail(SfmErrorKind::BadOptions, "the stage time limit must be positive, got " + std::to_string(*o.stage_time_limit_s) + " s");
+    fail(SfmErrorKind::BadOptions,
+         "the stage time limit must be positive, got " + std::to_string(*o.stage_time_limit_s) + " s");
   const fs::path colmap_exe = require_colmap(o.colmap);
   const PhotoScan scan = scan_photos(o.images);
   check_photos_found(scan, o.images);
@@ -162,8 +170,9 @@ SfmResult run_sfm(const SfmOptions& o) {
   prepare_output(o, c.layout, scan.photos);
   c.log.open(c.layout.log, std::ios::binary | std::ios::trunc);
   if (!c.log) fail(SfmErrorKind::OutputExists, "cannot write the log file " + in_quotes(c.layout.log));
-  c.log << "######## desplat_sfm: " << num_photos << " photos; " << cameras.reason << "\n######## matching: "
-        << matcher_reason << "\n" << std::flush;
+  c.log << "######## desplat_sfm: " << num_photos << " photos; " << cameras.reason
+        << "\n######## matching: " << matcher_reason << "\n"
+        << std::flush;
 
   Ladder ladder{c, o, min_registered, cameras.single};
   const std::string model = o.camera_model.empty() ? auto_camera_model(cameras.single) : o.camera_model;

@@ -49,9 +49,12 @@ class ChildGuard {
         continue;
       }
       pid_ = -1;
-      if (r < 0) exit = {ProcessExit::How::Signaled, 0};
-      else if (WIFSIGNALED(status)) exit = {ProcessExit::How::Signaled, WTERMSIG(status)};
-      else exit = {ProcessExit::How::Exited, WEXITSTATUS(status)};
+      if (r < 0)
+        exit = {ProcessExit::How::Signaled, 0};
+      else if (WIFSIGNALED(status))
+        exit = {ProcessExit::How::Signaled, WTERMSIG(status)};
+      else
+        exit = {ProcessExit::How::Exited, WEXITSTATUS(status)};
       return true;
     }
   }
@@ -113,8 +116,8 @@ class SpawnAttr {
 
 }  // namespace
 
-ProcessExit run_subprocess(const std::vector<std::string>& argv,
-                           const std::function<void(std::string_view)>& on_output, double time_limit_seconds) {
+ProcessExit run_subprocess(const std::vector<std::string>& argv, const std::function<void(std::string_view)>& on_output,
+                           double time_limit_seconds) {
   if (argv.empty()) throw std::invalid_argument("run_subprocess: no program given");
   if (!(time_limit_seconds >= 0))
     throw std::invalid_argument("time limit must be 0 (none) or positive, got " + std::to_string(time_limit_seconds));

@@ -12,9 +12,9 @@
 namespace desplat::synth {
 
 struct ViewPose {
-  Eigen::Matrix3d R_cw;   // world-to-camera rotation: rows are the camera's x (right),
-                          // y (down) and z (viewing direction) in world coordinates
-  Eigen::Vector3d t_cw;   // world-to-camera translation: p_cam = R_cw·p + t_cw
+  Eigen::Matrix3d R_cw;    // world-to-camera rotation: rows are the camera's x (right),
+                           // y (down) and z (viewing direction) in world coordinates
+  Eigen::Vector3d t_cw;    // world-to-camera translation: p_cam = R_cw·p + t_cw
   Eigen::Vector3d center;  // camera center in world coordinates
 };
 

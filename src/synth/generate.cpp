@@ -20,9 +20,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-
 // What an earlier run wrote; --overwrite removes exactly these.
-const std::vector<std::string> kOutputs{"images",        "clean",          "distractor_masks", "sparse",
+const std::vector<std::string> kOutputs{"images",         "clean",         "distractor_masks", "sparse",
                                         "train_list.txt", "test_list.txt", "scene.json"};
 
 void prepare_output(const GenerateOptions& o) {
@@ -30,8 +29,9 @@ void prepare_output(const GenerateOptions& o) {
   if (fs::exists(o.out) && !fs::is_directory(o.out)) throw SynthError(o.out.string() + ": exists and is not a folder");
   if (fs::is_directory(o.out) && !fs::is_empty(o.out)) {
     if (!fs::exists(o.out / "scene.json"))
-      throw SynthError(o.out.string() + ": folder is not empty and holds no generated scene (no scene.json); "
-                                        "choose an empty or new folder");
+      throw SynthError(o.out.string() +
+                       ": folder is not empty and holds no generated scene (no scene.json); "
+                       "choose an empty or new folder");
     if (!o.overwrite)
       throw SynthError(o.out.string() + ": holds an earlier generated scene; pass --overwrite to replace it");
     for (const auto& name : kOutputs) fs::remove_all(o.out / name, ec);
@@ -108,8 +108,9 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
     if (is_test_view(k)) continue;
     if (train_index++ % d.distractors.track_length == 0) track_first = k;
     if (cluttered[static_cast<size_t>(k)])
-      distractors[static_cast<size_t>(k)] = Primitives(
-          make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, target, d.seed, track_first), d.world.light);
+      distractors[static_cast<size_t>(k)] =
+          Primitives(make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, target, d.seed, track_first),
+                     d.world.light);
   }
 
   GenerationReport report;
@@ -148,7 +149,8 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
     report.write_seconds += t_write.seconds();
     if (cluttered[static_cast<size_t>(k)]) {
       if (std::none_of(r.mask.pixels.begin(), r.mask.pixels.end(), [](float m) { return m > 0; }))
-        throw SynthError("view " + name + ": its distractors cover no pixel (hidden by static geometry); "
+        throw SynthError("view " + name +
+                         ": its distractors cover no pixel (hidden by static geometry); "
                          "lower distractors.depth or raise distractors.size");
       report.cluttered_views.push_back(name);
     }
@@ -163,7 +165,8 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
   const Stopwatch t_points;
   colmap::Model model;
   model.cameras[1] = lens;
-  for (int k = 0; k < n; ++k) model.images[static_cast<uint32_t>(k + 1)] = colmap_image(k, n, poses[static_cast<size_t>(k)]);
+  for (int k = 0; k < n; ++k)
+    model.images[static_cast<uint32_t>(k + 1)] = colmap_image(k, n, poses[static_cast<size_t>(k)]);
   add_sparse_points({&scene.objects, &distractors, &poses, lens, d.points, d.seed}, model);
   report.num_points = model.points.size();
   for (const auto& [id, p] : model.points) report.num_observations += p.track.size();

@@ -24,7 +24,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-
 std::string number_text(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", v);
@@ -69,7 +68,8 @@ struct Size {
 };
 
 // The io layer's photo-file calls with their errors in this tool's type.
-template <class Fn> auto image_io(Fn&& fn) {
+template <class Fn>
+auto image_io(Fn&& fn) {
   try {
     return fn();
   } catch (const ImageError& e) {
@@ -135,7 +135,8 @@ Box bounding_box(const cv::Mat& footprint) {
   Box b{footprint.cols, footprint.rows, 0, 0};
   for (int y = 0; y < footprint.rows; ++y)
     for (int x = 0; x < footprint.cols; ++x)
-      if (footprint.at<uint8_t>(y, x)) b = {std::min(b[0], x), std::min(b[1], y), std::max(b[2], x + 1), std::max(b[3], y + 1)};
+      if (footprint.at<uint8_t>(y, x))
+        b = {std::min(b[0], x), std::min(b[1], y), std::max(b[2], x + 1), std::max(b[3], y + 1)};
   return b;
 }
 
@@ -243,7 +244,8 @@ cv::Mat paint(PhotoFile& photo, const std::vector<Placed>& placed, const fs::pat
         for (int c = 0; c < C; ++c) {
           if (source) {
             const int sc = std::min(c, source->image.channels - 1);
-            px[c] = source->image.pixels[(size_t(y + dy) * source->image.width + (x + dx)) * source->image.channels + sc];
+            px[c] =
+                source->image.pixels[(size_t(y + dy) * source->image.width + (x + dx)) * source->image.channels + sc];
           } else {
             const bool alpha = c == 3 || (C == 2 && c == 1);
             const float grey = (o.color[0] + o.color[1] + o.color[2]) / (3 * 255.0f);
@@ -277,7 +279,8 @@ void check_output_place(const fs::path& data, const fs::path& out, bool overwrit
                        " or inside it");
   for (const char* e : kOutputEntries)
     if (!overwrite && fs::exists(out / e, ec))
-      throw OccludeError((out / e).string() + ": the output folder already holds a scene (use --overwrite to replace it)");
+      throw OccludeError((out / e).string() +
+                         ": the output folder already holds a scene (use --overwrite to replace it)");
 }
 
 // Only after the input has been checked, so a bad input never costs the previous output.
@@ -334,9 +337,13 @@ nlohmann::json report_json(const OccludeOptions& o, const fs::path& data, const 
     }
     views.push_back(j);
   }
-  return {{"data", data.string()},  {"seed", o.seed},
-          {"fraction", o.fraction}, {"coverage", {o.coverage_min, o.coverage_max}}, {"track_length", o.track_length},
-          {"box_convention", "[x0, y0, x1, y1) pixels"}, {"views", views}};
+  return {{"data", data.string()},
+          {"seed", o.seed},
+          {"fraction", o.fraction},
+          {"coverage", {o.coverage_min, o.coverage_max}},
+          {"track_length", o.track_length},
+          {"box_convention", "[x0, y0, x1, y1) pixels"},
+          {"views", views}};
 }
 
 // The input capture: registered names (sorted), their roles, and their photos' sizes.
@@ -370,8 +377,8 @@ Capture read_capture(const fs::path& data, const SplitOptions& split) {
     const Size s = read_size(path);
     const colmap::Camera& cam = model.cameras.at(image.camera_id);
     if (uint64_t(s.width) != cam.width || uint64_t(s.height) != cam.height)
-      throw OccludeError(path.string() + ": image is " + size_text(s.width, s.height) + " px but its COLMAP camera is " +
-                         size_text(int(cam.width), int(cam.height)) + " px");
+      throw OccludeError(path.string() + ": image is " + size_text(s.width, s.height) +
+                         " px but its COLMAP camera is " + size_text(int(cam.width), int(cam.height)) + " px");
     c.sizes[image.name] = s;
   }
   return c;

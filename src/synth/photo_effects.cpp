@@ -17,8 +17,7 @@ std::array<double, 3> exposure_gain(const ExposureSpec& spec, uint64_t seed, int
 }
 
 void apply_gain(FloatImage& image, const std::array<double, 3>& gain) {
-  for (size_t i = 0; i < image.pixels.size(); ++i)
-    image.pixels[i] = static_cast<float>(image.pixels[i] * gain[i % 3]);
+  for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = static_cast<float>(image.pixels[i] * gain[i % 3]);
 }
 
 void add_sensor_noise(FloatImage& image, const NoiseSpec& spec, uint64_t seed, int view) {

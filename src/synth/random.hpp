@@ -31,7 +31,7 @@ class Rng {
   int integer(int lo, int hi) {  // [lo, hi]
     return lo + static_cast<int>(next() % static_cast<uint64_t>(hi - lo + 1));
   }
-  double normal() {  // standard normal, Box–Muller
+  double normal() {                     // standard normal, Box–Muller
     const double u1 = 1.0 - uniform();  // (0, 1]
     const double u2 = uniform();
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(2 * std::numbers::pi * u2);

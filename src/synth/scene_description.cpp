@@ -6,8 +6,8 @@
 #include <set>
 #include <sstream>
 
-#include "desplat/synth/synth.hpp"
 #include "desplat/io/json_text.hpp"
+#include "desplat/synth/synth.hpp"
 
 namespace desplat::synth {
 namespace {
@@ -116,7 +116,8 @@ Vec3d coords(const json& v, const std::string& key, const Source& src) { return 
 
 void apply_texture(TextureSpec& t, const json& j, const std::string& prefix, const Source& s) {
   apply_fields(j, prefix, s,
-               {{"kind", [&](const json& v, const std::string& k) {
+               {{"kind",
+                 [&](const json& v, const std::string& k) {
                    t.kind = one_of(v, k, s, {"solid", "checker", "stripes", "noise"});
                  }},
                 {"color_a", [&](const json& v, const std::string& k) { t.color_a = color(v, k, s); }},
@@ -128,7 +129,10 @@ void apply_texture(TextureSpec& t, const json& j, const std::string& prefix, con
 ObjectSpec parse_object(const json& j, const std::string& prefix, const Source& s) {
   ObjectSpec o;
   apply_fields(j, prefix, s,
-               {{"shape", [&](const json& v, const std::string& k) { o.shape = one_of(v, k, s, {"plane", "box", "sphere"}); }},
+               {{"shape",
+                 [&](const json& v, const std::string& k) {
+                   o.shape = one_of(v, k, s, {"plane", "box", "sphere"});
+                 }},
                 {"center", [&](const json& v, const std::string& k) { o.center = coords(v, k, s); }},
                 {"size", [&](const json& v, const std::string& k) { o.size = numbers<3>(v, k, s, 0, kBig); }},
                 {"radius", [&](const json& v, const std::string& k) { o.radius = number(v, k, s, 1e-6, kBig); }},
@@ -144,38 +148,47 @@ ObjectSpec parse_object(const json& j, const std::string& prefix, const Source& 
 }
 
 void apply_world(WorldSpec& w, const json& j, const std::string& prefix, const Source& s) {
-  apply_fields(j, prefix, s,
-               {{"objects",
-                 [&](const json& v, const std::string& k) {
-                   if (!v.is_array() || v.empty()) s.fail(k, "must be a non-empty array of objects, got " + shown(v));
-                   w.objects.clear();
-                   for (size_t i = 0; i < v.size(); ++i)
-                     w.objects.push_back(parse_object(v[i], k + "[" + std::to_string(i) + "]", s));
-                 }},
-                {"light",
-                 [&](const json& v, const std::string& k) {
-                   apply_fields(v, k, s,
-                                {{"direction", [&](const json& x, const std::string& kk) { w.light.direction = coords(x, kk, s); }},
-                                 {"ambient", [&](const json& x, const std::string& kk) { w.light.ambient = number(x, kk, s, 0, 1); }}});
-                 }},
-                {"background", [&](const json& v, const std::string& k) { w.background = color(v, k, s); }}});
+  apply_fields(
+      j, prefix, s,
+      {{"objects",
+        [&](const json& v, const std::string& k) {
+          if (!v.is_array() || v.empty()) s.fail(k, "must be a non-empty array of objects, got " + shown(v));
+          w.objects.clear();
+          for (size_t i = 0; i < v.size(); ++i)
+            w.objects.push_back(parse_object(v[i], k + "[" + std::to_string(i) + "]", s));
+        }},
+       {"light",
+        [&](const json& v, const std::string& k) {
+          apply_fields(
+              v, k, s,
+              {{"direction", [&](const json& x, const std::string& kk) { w.light.direction = coords(x, kk, s); }},
+               {"ambient", [&](const json& x, const std::string& kk) { w.light.ambient = number(x, kk, s, 0, 1); }}});
+        }},
+       {"background", [&](const json& v, const std::string& k) { w.background = color(v, k, s); }}});
 }
 
 void apply_camera(CameraSpec& c, const json& j, const std::string& prefix, const Source& s) {
-  apply_fields(j, prefix, s,
-               {{"width", [&](const json& v, const std::string& k) { c.width = integer(v, k, s, 8, 8192); }},
-                {"height", [&](const json& v, const std::string& k) { c.height = integer(v, k, s, 8, 8192); }},
-                {"fov_x_deg", [&](const json& v, const std::string& k) { c.fov_x_deg = number(v, k, s, 5, 150); }},
-                {"principal_offset_px",
-                 [&](const json& v, const std::string& k) { c.principal_offset_px = numbers<2>(v, k, s, -kBig, kBig); }},
-                {"model", [&](const json& v, const std::string& k) { c.model = one_of(v, k, s, {"PINHOLE", "OPENCV"}); }},
-                {"distortion", [&](const json& v, const std::string& k) { c.distortion = numbers<4>(v, k, s, -1, 1); }}});
+  apply_fields(
+      j, prefix, s,
+      {{"width", [&](const json& v, const std::string& k) { c.width = integer(v, k, s, 8, 8192); }},
+       {"height", [&](const json& v, const std::string& k) { c.height = integer(v, k, s, 8, 8192); }},
+       {"fov_x_deg", [&](const json& v, const std::string& k) { c.fov_x_deg = number(v, k, s, 5, 150); }},
+       {"principal_offset_px",
+        [&](const json& v, const std::string& k) { c.principal_offset_px = numbers<2>(v, k, s, -kBig, kBig); }},
+       {"model",
+        [&](const json& v, const std::string& k) {
+          c.model = one_of(v, k, s, {"PINHOLE", "OPENCV"});
+        }},
+       {"distortion", [&](const json& v, const std::string& k) { c.distortion = numbers<4>(v, k, s, -1, 1); }}});
 }
 
 void apply_views(ViewsSpec& w, const json& j, const std::string& prefix, const Source& s) {
   apply_fields(j, prefix, s,
                {{"count", [&](const json& v, const std::string& k) { w.count = integer(v, k, s, 2, 9999); }},
-                {"path", [&](const json& v, const std::string& k) { w.path = one_of(v, k, s, {"orbit", "forward"}); }},
+                {"path",
+                 [&](const json& v, const std::string& k) {
+                   w.path = one_of(v, k, s, {"orbit", "forward"});
+                 }},
                 {"target", [&](const json& v, const std::string& k) { w.target = coords(v, k, s); }},
                 {"radius", [&](const json& v, const std::string& k) { w.radius = number(v, k, s, 1e-3, kBig); }},
                 {"height", [&](const json& v, const std::string& k) { w.height = number(v, k, s, -kBig, kBig); }},
@@ -196,18 +209,20 @@ void apply_effects(Description& d, const std::string& section, const json& j, co
                   {"clouds", [&](const json& v, const std::string& k) { y.clouds = number(v, k, s, 0, 1); }}});
   } else if (section == "distractors") {
     auto& x = d.distractors;
-    apply_fields(j, section, s,
-                 {{"clutter_ratio", [&](const json& v, const std::string& k) { x.clutter_ratio = number(v, k, s, 0, 1); }},
-                  {"per_view", [&](const json& v, const std::string& k) { x.per_view = range_pair<int>(v, k, s, 1, 64); }},
-                  {"size", [&](const json& v, const std::string& k) { x.size = range_pair<double>(v, k, s, 0.01, 2); }},
-                  {"depth", [&](const json& v, const std::string& k) { x.depth = range_pair<double>(v, k, s, 0.01, 0.95); }},
-                  {"track_length", [&](const json& v, const std::string& k) { x.track_length = integer(v, k, s, 1, 1000); }}});
+    apply_fields(
+        j, section, s,
+        {{"clutter_ratio", [&](const json& v, const std::string& k) { x.clutter_ratio = number(v, k, s, 0, 1); }},
+         {"per_view", [&](const json& v, const std::string& k) { x.per_view = range_pair<int>(v, k, s, 1, 64); }},
+         {"size", [&](const json& v, const std::string& k) { x.size = range_pair<double>(v, k, s, 0.01, 2); }},
+         {"depth", [&](const json& v, const std::string& k) { x.depth = range_pair<double>(v, k, s, 0.01, 0.95); }},
+         {"track_length", [&](const json& v, const std::string& k) { x.track_length = integer(v, k, s, 1, 1000); }}});
   } else if (section == "exposure") {
     auto& e = d.exposure;
-    apply_fields(j, section, s,
-                 {{"stops", [&](const json& v, const std::string& k) { e.stops = number(v, k, s, 0, 4); }},
-                  {"white_balance", [&](const json& v, const std::string& k) { e.white_balance = number(v, k, s, 0, 0.9); }},
-                  {"test_views", [&](const json& v, const std::string& k) { e.test_views = boolean(v, k, s); }}});
+    apply_fields(
+        j, section, s,
+        {{"stops", [&](const json& v, const std::string& k) { e.stops = number(v, k, s, 0, 4); }},
+         {"white_balance", [&](const json& v, const std::string& k) { e.white_balance = number(v, k, s, 0, 0.9); }},
+         {"test_views", [&](const json& v, const std::string& k) { e.test_views = boolean(v, k, s); }}});
   } else if (section == "noise") {
     auto& n = d.noise;
     apply_fields(j, section, s,
@@ -216,12 +231,14 @@ void apply_effects(Description& d, const std::string& section, const json& j, co
                   {"test_views", [&](const json& v, const std::string& k) { n.test_views = boolean(v, k, s); }}});
   } else {  // points
     auto& p = d.points;
-    apply_fields(j, section, s,
-                 {{"count", [&](const json& v, const std::string& k) { p.count = integer(v, k, s, 0, 10'000'000); }},
-                  {"position_noise_px", [&](const json& v, const std::string& k) { p.position_noise_px = number(v, k, s, 0, 100); }},
-                  {"observation_noise_px",
-                   [&](const json& v, const std::string& k) { p.observation_noise_px = number(v, k, s, 0, 100); }},
-                  {"min_track", [&](const json& v, const std::string& k) { p.min_track = integer(v, k, s, 1, 9999); }}});
+    apply_fields(
+        j, section, s,
+        {{"count", [&](const json& v, const std::string& k) { p.count = integer(v, k, s, 0, 10'000'000); }},
+         {"position_noise_px",
+          [&](const json& v, const std::string& k) { p.position_noise_px = number(v, k, s, 0, 100); }},
+         {"observation_noise_px",
+          [&](const json& v, const std::string& k) { p.observation_noise_px = number(v, k, s, 0, 100); }},
+         {"min_track", [&](const json& v, const std::string& k) { p.min_track = integer(v, k, s, 1, 9999); }}});
   }
 }
 
@@ -267,22 +284,23 @@ void check_description(const Description& d, const Source& s) {
 
 void apply_layer(Description& d, const json& raw, const Source& s) {
   const json j = expand_dotted(raw, "", s);
-  apply_fields(j, "", s,
-               {{"base", [&](const json&, const std::string& k) { s.fail(k, "is only allowed at the top of a file"); }},
-                {"seed",
-                 [&](const json& v, const std::string& k) {
-                   if (!v.is_number_unsigned()) s.fail(k, "must be a non-negative integer, got " + shown(v));
-                   d.seed = v.get<uint64_t>();
-                 }},
-                {"camera", [&](const json& v, const std::string& k) { apply_camera(d.camera, v, k, s); }},
-                {"views", [&](const json& v, const std::string& k) { apply_views(d.views, v, k, s); }},
-                {"supersampling", [&](const json& v, const std::string& k) { d.supersampling = integer(v, k, s, 1, 4); }},
-                {"world", [&](const json& v, const std::string& k) { apply_world(d.world, v, k, s); }},
-                {"sky", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
-                {"distractors", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
-                {"exposure", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
-                {"noise", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
-                {"points", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }}});
+  apply_fields(
+      j, "", s,
+      {{"base", [&](const json&, const std::string& k) { s.fail(k, "is only allowed at the top of a file"); }},
+       {"seed",
+        [&](const json& v, const std::string& k) {
+          if (!v.is_number_unsigned()) s.fail(k, "must be a non-negative integer, got " + shown(v));
+          d.seed = v.get<uint64_t>();
+        }},
+       {"camera", [&](const json& v, const std::string& k) { apply_camera(d.camera, v, k, s); }},
+       {"views", [&](const json& v, const std::string& k) { apply_views(d.views, v, k, s); }},
+       {"supersampling", [&](const json& v, const std::string& k) { d.supersampling = integer(v, k, s, 1, 4); }},
+       {"world", [&](const json& v, const std::string& k) { apply_world(d.world, v, k, s); }},
+       {"sky", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
+       {"distractors", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
+       {"exposure", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
+       {"noise", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }},
+       {"points", [&](const json& v, const std::string& k) { apply_effects(d, k, v, s); }}});
 }
 
 json read_json_file(const fs::path& file) {
@@ -322,10 +340,29 @@ json rgb_json(const Rgb& c) { return json::array({c[0], c[1], c[2]}); }
 }  // namespace
 
 std::vector<ObjectSpec> default_world_objects() {
-  ObjectSpec ground{"plane", {0, 0, 0}, {8, 8, 0}, 0.5, {0, 0, 1}, 0, {"checker", {0.75, 0.7, 0.6}, {0.35, 0.3, 0.28}, 2, 0.4}};
-  ObjectSpec box1{"box", {-0.6, -0.3, 0.4}, {0.8, 0.8, 0.8}, 0.5, {0, 0, 1}, 25, {"noise", {0.8, 0.35, 0.2}, {0.3, 0.1, 0.05}, 6, 0.3}};
-  ObjectSpec box2{"box", {0.7, 0.6, 0.25}, {1.0, 0.5, 0.5}, 0.5, {0, 0, 1}, -15, {"stripes", {0.2, 0.45, 0.75}, {0.85, 0.85, 0.8}, 5, 0.3}};
-  ObjectSpec ball{"sphere", {0.5, -0.7, 0.45}, {1, 1, 1}, 0.45, {0, 0, 1}, 0, {"noise", {0.3, 0.7, 0.35}, {0.9, 0.85, 0.3}, 5, 0.4}};
+  ObjectSpec ground{
+      "plane", {0, 0, 0}, {8, 8, 0}, 0.5, {0, 0, 1}, 0, {"checker", {0.75, 0.7, 0.6}, {0.35, 0.3, 0.28}, 2, 0.4}};
+  ObjectSpec box1{"box",
+                  {-0.6, -0.3, 0.4},
+                  {0.8, 0.8, 0.8},
+                  0.5,
+                  {0, 0, 1},
+                  25,
+                  {"noise", {0.8, 0.35, 0.2}, {0.3, 0.1, 0.05}, 6, 0.3}};
+  ObjectSpec box2{"box",
+                  {0.7, 0.6, 0.25},
+                  {1.0, 0.5, 0.5},
+                  0.5,
+                  {0, 0, 1},
+                  -15,
+                  {"stripes", {0.2, 0.45, 0.75}, {0.85, 0.85, 0.8}, 5, 0.3}};
+  ObjectSpec ball{"sphere",
+                  {0.5, -0.7, 0.45},
+                  {1, 1, 1},
+                  0.45,
+                  {0, 0, 1},
+                  0,
+                  {"noise", {0.3, 0.7, 0.35}, {0.9, 0.85, 0.3}, 5, 0.4}};
   return {ground, box1, box2, ball};
 }
 
@@ -347,33 +384,65 @@ json description_to_json(const Description& d) {
   json objects = json::array();
   for (const auto& o : d.world.objects) {
     const auto& t = o.texture;
-    objects.push_back({{"shape", o.shape}, {"center", o.center}, {"size", o.size}, {"radius", o.radius},
-                       {"normal", o.normal}, {"yaw_deg", o.yaw_deg},
-                       {"texture", {{"kind", t.kind}, {"color_a", rgb_json(t.color_a)}, {"color_b", rgb_json(t.color_b)},
-                                    {"scale", t.scale}, {"detail", t.detail}}}});
+    objects.push_back({{"shape", o.shape},
+                       {"center", o.center},
+                       {"size", o.size},
+                       {"radius", o.radius},
+                       {"normal", o.normal},
+                       {"yaw_deg", o.yaw_deg},
+                       {"texture",
+                        {{"kind", t.kind},
+                         {"color_a", rgb_json(t.color_a)},
+                         {"color_b", rgb_json(t.color_b)},
+                         {"scale", t.scale},
+                         {"detail", t.detail}}}});
   }
   const auto& c = d.camera;
   const auto& v = d.views;
   return {{"seed", d.seed},
-          {"camera", {{"width", c.width}, {"height", c.height}, {"fov_x_deg", c.fov_x_deg},
-                      {"principal_offset_px", c.principal_offset_px}, {"model", c.model}, {"distortion", c.distortion}}},
-          {"views", {{"count", v.count}, {"path", v.path}, {"target", v.target}, {"radius", v.radius},
-                     {"height", v.height}, {"arc_deg", v.arc_deg}, {"start_deg", v.start_deg}, {"spread", v.spread},
-                     {"position_jitter", v.position_jitter}}},
+          {"camera",
+           {{"width", c.width},
+            {"height", c.height},
+            {"fov_x_deg", c.fov_x_deg},
+            {"principal_offset_px", c.principal_offset_px},
+            {"model", c.model},
+            {"distortion", c.distortion}}},
+          {"views",
+           {{"count", v.count},
+            {"path", v.path},
+            {"target", v.target},
+            {"radius", v.radius},
+            {"height", v.height},
+            {"arc_deg", v.arc_deg},
+            {"start_deg", v.start_deg},
+            {"spread", v.spread},
+            {"position_jitter", v.position_jitter}}},
           {"supersampling", d.supersampling},
-          {"world", {{"objects", objects},
-                     {"light", {{"direction", d.world.light.direction}, {"ambient", d.world.light.ambient}}},
-                     {"background", rgb_json(d.world.background)}}},
-          {"sky", {{"enabled", d.sky.enabled}, {"horizon", rgb_json(d.sky.horizon)}, {"zenith", rgb_json(d.sky.zenith)},
-                   {"clouds", d.sky.clouds}}},
-          {"distractors", {{"clutter_ratio", d.distractors.clutter_ratio}, {"per_view", d.distractors.per_view},
-                           {"size", d.distractors.size}, {"depth", d.distractors.depth},
-                           {"track_length", d.distractors.track_length}}},
-          {"exposure", {{"stops", d.exposure.stops}, {"white_balance", d.exposure.white_balance},
-                        {"test_views", d.exposure.test_views}}},
+          {"world",
+           {{"objects", objects},
+            {"light", {{"direction", d.world.light.direction}, {"ambient", d.world.light.ambient}}},
+            {"background", rgb_json(d.world.background)}}},
+          {"sky",
+           {{"enabled", d.sky.enabled},
+            {"horizon", rgb_json(d.sky.horizon)},
+            {"zenith", rgb_json(d.sky.zenith)},
+            {"clouds", d.sky.clouds}}},
+          {"distractors",
+           {{"clutter_ratio", d.distractors.clutter_ratio},
+            {"per_view", d.distractors.per_view},
+            {"size", d.distractors.size},
+            {"depth", d.distractors.depth},
+            {"track_length", d.distractors.track_length}}},
+          {"exposure",
+           {{"stops", d.exposure.stops},
+            {"white_balance", d.exposure.white_balance},
+            {"test_views", d.exposure.test_views}}},
           {"noise", {{"sigma", d.noise.sigma}, {"shot", d.noise.shot}, {"test_views", d.noise.test_views}}},
-          {"points", {{"count", d.points.count}, {"position_noise_px", d.points.position_noise_px},
-                      {"observation_noise_px", d.points.observation_noise_px}, {"min_track", d.points.min_track}}}};
+          {"points",
+           {{"count", d.points.count},
+            {"position_noise_px", d.points.position_noise_px},
+            {"observation_noise_px", d.points.observation_noise_px},
+            {"min_track", d.points.min_track}}}};
 }
 
 }  // namespace desplat::synth

@@ -32,9 +32,9 @@ struct StaticScene {
 };
 
 struct ViewRender {
-  FloatImage clean;                    // RGB, static scene only
+  FloatImage clean;                     // RGB, static scene only
   std::optional<FloatImage> cluttered;  // RGB with distractors; only when the view has some
-  FloatImage mask;                     // 1 channel, 1 where > half the samples hit a distractor
+  FloatImage mask;                      // 1 channel, 1 where > half the samples hit a distractor
   uint64_t distractor_ray_tests = 0, sky_evaluations = 0;
 };
 

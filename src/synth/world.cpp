@@ -127,8 +127,8 @@ Hit Primitives::nearest(const Ray& ray, double t_max) const {
     if (!p.unbounded) {  // cheap reject: the ray misses the bounding sphere or it lies behind
       const Vec3 oc = p.center - ray.origin;
       const double along = oc.dot(ray.dir);
-      if (oc.squaredNorm() - along * along > p.bound_radius2 ||
-          (along < 0 && oc.squaredNorm() > p.bound_radius2) || along - std::sqrt(p.bound_radius2) >= best.t)
+      if (oc.squaredNorm() - along * along > p.bound_radius2 || (along < 0 && oc.squaredNorm() > p.bound_radius2) ||
+          along - std::sqrt(p.bound_radius2) >= best.t)
         continue;
     }
     const Vec3 o = p.to_local * (ray.origin - p.center);  // ray in the object's frame

@@ -23,9 +23,9 @@ struct Ray {
 
 struct Hit {
   double t = std::numeric_limits<double>::infinity();  // distance along the ray
-  int primitive = -1;                                   // -1: nothing hit
-  Vec3 normal{0, 0, 1};                                 // unit, facing the ray
-  Vec3 texture_coord{0, 0, 0};                          // object-local, see Primitive
+  int primitive = -1;                                  // -1: nothing hit
+  Vec3 normal{0, 0, 1};                                // unit, facing the ray
+  Vec3 texture_coord{0, 0, 0};                         // object-local, see Primitive
   bool hit() const { return primitive >= 0; }
 };
 

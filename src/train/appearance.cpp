@@ -1,8 +1,8 @@
 // The appearance MLP's forward and backward passes over the visible Gaussians (docs/METHOD.md §10).
 #include "desplat/train/appearance.hpp"
 
-#include <Eigen/Core>
 #include <omp.h>
+#include <Eigen/Core>
 
 #include <algorithm>
 #include <cmath>
@@ -16,7 +16,8 @@ namespace desplat {
 
 void AppearanceSettings::validate() const {
   auto positive = [](int v, const char* name) {
-    if (v <= 0) throw std::invalid_argument(std::string("appearance.") + name + " must be > 0 (got " + std::to_string(v) + ")");
+    if (v <= 0)
+      throw std::invalid_argument(std::string("appearance.") + name + " must be > 0 (got " + std::to_string(v) + ")");
   };
   positive(image_dim, "image_dim");
   positive(fourier_frequencies, "fourier_frequencies");
@@ -88,7 +89,8 @@ bool AppearanceModel::adam_update(std::span<const float> d_mlp, std::span<const 
   const AdamBiasCorrection bc = advance_adam_step(adam_step, a);
   const double bc1 = bc.bc1;
   const float sqrt_bc2 = bc.sqrt_bc2;
-  adam_span(mlp.data(), mlp_m.data(), mlp_v.data(), d_mlp.data(), mlp.size(), float(settings.lr_mlp / bc1), sqrt_bc2, a);
+  adam_span(mlp.data(), mlp_m.data(), mlp_v.data(), d_mlp.data(), mlp.size(), float(settings.lr_mlp / bc1), sqrt_bc2,
+            a);
   adam_span(image_embeddings.data(), embed_m.data(), embed_v.data(), d_embeddings.data(), image_embeddings.size(),
             float(settings.lr_image / bc1), sqrt_bc2, a);
   return true;
@@ -110,8 +112,8 @@ constexpr int64_t kBatch = 256;  // rows per matrix product inside a slab
 // always lives in its own (aligned) allocations, never in a mapped std::vector.
 struct Layers {
   std::vector<int> sizes;
-  std::vector<RowMat> w;                // layer l: [sizes[l+1], sizes[l]]
-  std::vector<Eigen::RowVectorXf> b;    // [sizes[l+1]]
+  std::vector<RowMat> w;              // layer l: [sizes[l+1], sizes[l]]
+  std::vector<Eigen::RowVectorXf> b;  // [sizes[l+1]]
   explicit Layers(const AppearanceModel& m) : sizes(m.layer_sizes()) {
     for (size_t l = 0; l + 1 < sizes.size(); ++l) {
       w.push_back(RowMat::Zero(sizes[l + 1], sizes[l]));

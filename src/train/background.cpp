@@ -32,7 +32,8 @@ int BackgroundSettings::sh_degree_at(int64_t step) const {
 
 void BackgroundSettings::validate() const {
   auto positive = [](int v, const char* name) {
-    if (v <= 0) throw std::invalid_argument(std::string("background.") + name + " must be > 0 (got " + std::to_string(v) + ")");
+    if (v <= 0)
+      throw std::invalid_argument(std::string("background.") + name + " must be > 0 (got " + std::to_string(v) + ")");
   };
   positive(image_dim, "image_dim");
   positive(hidden_width, "hidden_width");
@@ -47,7 +48,8 @@ void BackgroundSettings::validate() const {
     if (!(v >= 0 && std::isfinite(v)))
       throw std::invalid_argument(std::string("background.") + name + " must be ≥ 0 (got " + std::to_string(v) + ")");
   if (!(explained_share >= 0 && explained_share < 1))
-    throw std::invalid_argument("background.explained_share must be in [0, 1) (got " + std::to_string(explained_share) + ")");
+    throw std::invalid_argument("background.explained_share must be in [0, 1) (got " + std::to_string(explained_share) +
+                                ")");
 }
 
 std::vector<int> BackgroundModel::layer_sizes() const {

@@ -14,7 +14,8 @@ float max_log_scale(const GaussianSet& g, size_t i) {
 float max_scale(const GaussianSet& g, size_t i) { return std::exp(max_log_scale(g, i)); }
 float logit(float p) { return std::log(p / (1 - p)); }
 
-template <typename T> void append_row(std::vector<T>& dst, const std::vector<T>& src, size_t i, int stride) {
+template <typename T>
+void append_row(std::vector<T>& dst, const std::vector<T>& src, size_t i, int stride) {
   dst.insert(dst.end(), src.begin() + i * stride, src.begin() + (i + 1) * stride);
 }
 
@@ -35,7 +36,8 @@ GaussianSet copy_rows(const GaussianSet& g, const std::vector<uint8_t>& mask) {
   GaussianSet out = empty_like(g);
   for (size_t i = 0; i < g.size(); ++i) {
     if (!mask[i]) continue;
-    for (const ParamGroupInfo& info : kParamGroupTable) append_row(out.*info.values, g.*info.values, i, group_width(info, g));
+    for (const ParamGroupInfo& info : kParamGroupTable)
+      append_row(out.*info.values, g.*info.values, i, group_width(info, g));
   }
   return out;
 }

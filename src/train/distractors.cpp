@@ -1,13 +1,13 @@
 // Initialization and per-view density control of distractor Gaussians.
 #include "desplat/train/distractors.hpp"
 
+#include <unistd.h>
 #include <algorithm>
 #include <cmath>
-#include <random>
 #include <cstdio>
+#include <random>
 #include <stdexcept>
 #include <string>
-#include <unistd.h>
 
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/init.hpp"
@@ -87,7 +87,8 @@ float distractor_size_threshold(const DensifySettings& d, const DistractorSettin
 }
 
 RefineReport refine_distractors(TrainableGaussians& g, const DensifySettings& d, const DistractorSettings& s,
-                                int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new, double scene_depth) {
+                                int64_t step, int image_size, std::mt19937_64& rng, int64_t max_new,
+                                double scene_depth) {
   const bool densify = step < d.stop_split_at && step > s.grow_after;
   DensifySettings at_their_depth = d;
   at_their_depth.size_threshold = distractor_size_threshold(d, s, scene_depth);

@@ -33,8 +33,9 @@ Effects Effects::parse(const std::string& text) {
     any = true;
   }
   if (!any)
-    throw std::invalid_argument("--effects is empty (none, or a comma-separated list of distractors, appearance, "
-                                "background)");
+    throw std::invalid_argument(
+        "--effects is empty (none, or a comma-separated list of distractors, appearance, "
+        "background)");
   return e;
 }
 
@@ -50,8 +51,8 @@ void Effects::apply(TrainConfig& config) const {
 
 std::string Effects::to_string() const {
   std::string out;
-  for (auto [on, name] :
-       {std::pair{distractors, "distractors"}, std::pair{appearance, "appearance"}, std::pair{background, "background"}})
+  for (auto [on, name] : {std::pair{distractors, "distractors"}, std::pair{appearance, "appearance"},
+                          std::pair{background, "background"}})
     if (on) {
       if (!out.empty()) out += ',';
       out += name;
@@ -160,9 +161,10 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
   } else {
     ev.open_top_share = median(open_shares);
     ev.background = ev.open_top_share > r.sky_share;
-    ev.background_reason = "in the median training view, " + fixed2(100 * ev.open_top_share) +
-                           " % of the frame is open sky above the scene (smooth, no SfM point, connected to the top edge; " +
-                           "threshold " + fixed2(100 * r.sky_share) + " %)";
+    ev.background_reason =
+        "in the median training view, " + fixed2(100 * ev.open_top_share) +
+        " % of the frame is open sky above the scene (smooth, no SfM point, connected to the top edge; " +
+        "threshold " + fixed2(100 * r.sky_share) + " %)";
   }
   if (ev.judged_views < 3) {
     ev.reason = "only " + std::to_string(ev.judged_views) + " training views have " +

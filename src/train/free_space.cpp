@@ -80,8 +80,8 @@ double distance_to_segment(const std::array<double, 3>& p, const std::array<doub
   return std::sqrt(dist2);
 }
 
-double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a,
-                         const std::array<double, 3>& b, const float* log_scale, const float* quat, double r) {
+double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a, const std::array<double, 3>& b,
+                         const float* log_scale, const float* quat, double r) {
   // In the Gaussian's own frame (columns of R) Σ + r²·I is diagonal: s_k² + r².
   double qn = 0;
   for (int k = 0; k < 4; ++k) qn += double(quat[k]) * quat[k];
@@ -124,8 +124,8 @@ std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<fl
     }
   // The blind-gap rule reaches blind_gap × the segment's length from it.
   std::vector<double> gap_reach(path.from.size(), 0.0);
-  const bool gaps = path.blind_gap > 0 && path.from_camera.size() == path.from.size() &&
-                    path.to_camera.size() == path.from.size();
+  const bool gaps =
+      path.blind_gap > 0 && path.from_camera.size() == path.from.size() && path.to_camera.size() == path.from.size();
   if (gaps)
     for (size_t s = 0; s < gap_reach.size(); ++s) {
       double length2 = 0;
@@ -137,7 +137,8 @@ std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<fl
     const std::array<double, 3> p{means[3 * i], means[3 * i + 1], means[3 * i + 2]};
     double reach = path.radius;
     if (path.by_extent) {
-      const double s_max = std::exp(double(std::max({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]})));
+      const double s_max =
+          std::exp(double(std::max({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]})));
       reach = std::sqrt(path.radius * path.radius + s_max * s_max);
     }
     uint8_t verdict = kOffPath;
@@ -147,10 +148,10 @@ std::vector<uint8_t> on_camera_path(const CameraPath& path, const std::vector<fl
       if (p[0] < box[0] - r || p[1] < box[1] - r || p[2] < box[2] - r || p[0] > box[3] + r || p[1] > box[4] + r ||
           p[2] > box[5] + r)
         continue;
-      const bool in_tube = path.radius > 0 &&
-                           (path.by_extent ? tube_mahalanobis2(p, path.from[s], path.to[s], &log_scales[3 * i],
-                                                               &quats[4 * i], path.radius) <= 1.0
-                                           : distance_to_segment(p, path.from[s], path.to[s]) <= path.radius);
+      const bool in_tube =
+          path.radius > 0 && (path.by_extent ? tube_mahalanobis2(p, path.from[s], path.to[s], &log_scales[3 * i],
+                                                                 &quats[4 * i], path.radius) <= 1.0
+                                             : distance_to_segment(p, path.from[s], path.to[s]) <= path.radius);
       if (in_tube)
         verdict = kInTube;
       else if (gaps && verdict == kOffPath && in_blind_gap(p, path.from_camera[s], path.to_camera[s], path.blind_gap))

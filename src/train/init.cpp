@@ -16,7 +16,10 @@ struct PointCloudAdaptor {
   const std::vector<std::array<float, 3>>& pts;
   size_t kdtree_get_point_count() const { return pts.size(); }
   float kdtree_get_pt(size_t i, size_t dim) const { return pts[i][dim]; }
-  template <class BBox> bool kdtree_get_bbox(BBox&) const { return false; }
+  template <class BBox>
+  bool kdtree_get_bbox(BBox&) const {
+    return false;
+  }
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointCloudAdaptor>,
                                                    PointCloudAdaptor, 3, uint32_t>;
@@ -48,8 +51,7 @@ std::vector<float> mean_knn_distance(const std::vector<std::array<float, 3>>& xy
 }
 
 GaussianSet init_gaussians_from_points(const std::vector<std::array<float, 3>>& xyz,
-                                       const std::vector<std::array<uint8_t, 3>>& rgb, int sh_degree,
-                                       uint64_t seed) {
+                                       const std::vector<std::array<uint8_t, 3>>& rgb, int sh_degree, uint64_t seed) {
   if (xyz.size() != rgb.size()) throw std::invalid_argument("init: point and color counts differ");
   if (sh_degree < 0 || sh_degree > 3) throw std::invalid_argument("init: SH degree must be 0..3");
   GaussianSet g;

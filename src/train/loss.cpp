@@ -89,8 +89,8 @@ struct SsimShared {
 // the same sum in the same order as the separable filters give, whatever the band, so the
 // result does not depend on the thread count. One barrier: the backward's vertical pass reads
 // the partials of up to 10 position rows above its own band.
-double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int w, int h, float scale,
-                         float* d_x, const float* keep = nullptr) {
+double ssim_and_gradient(std::span<const float> x, std::span<const float> y, int w, int h, float scale, float* d_x,
+                         const float* keep = nullptr) {
   const int ow = w - kWindow + 1, oh = h - kWindow + 1;
   const size_t n_out = size_t(ow) * oh;
   constexpr int kHalf = kWindow / 2;
@@ -243,15 +243,14 @@ namespace {
 
 void check_keep(std::span<const float> keep, size_t pixels) {
   if (!keep.empty() && keep.size() != pixels)
-    throw std::invalid_argument("loss: the mask of kept pixels has " + std::to_string(keep.size()) +
-                                " values for " + std::to_string(pixels) + " pixels");
+    throw std::invalid_argument("loss: the mask of kept pixels has " + std::to_string(keep.size()) + " values for " +
+                                std::to_string(pixels) + " pixels");
 }
 
 }  // namespace
 
-PhotometricLoss photometric_loss(std::span<const float> render, std::span<const float> target, int width,
-                                 int height, float ssim_lambda, std::span<float> d_render,
-                                 std::span<const float> keep) {
+PhotometricLoss photometric_loss(std::span<const float> render, std::span<const float> target, int width, int height,
+                                 float ssim_lambda, std::span<float> d_render, std::span<const float> keep) {
   check_sizes(render.size(), target.size(), width, height);
   check_keep(keep, render.size() / 3);
   const bool grad = !d_render.empty();
@@ -317,7 +316,7 @@ double psnr(std::span<const float> a, std::span<const float> b, std::span<const 
   constexpr int64_t kChunk = 4096;
   const int64_t pixels = int64_t(a.size() / 3), chunks = (pixels + kChunk - 1) / kChunk;
   thread_local std::vector<double> se_scratch, n_scratch;  // reused: no allocation per step
-  std::vector<double>& chunk_se = se_scratch;  // the calling thread's; the team below shares them
+  std::vector<double>& chunk_se = se_scratch;              // the calling thread's; the team below shares them
   std::vector<double>& chunk_n = n_scratch;
   chunk_se.assign(static_cast<size_t>(chunks), 0.0);
   chunk_n.assign(static_cast<size_t>(chunks), 0.0);

@@ -15,8 +15,8 @@ double kept_pixels(std::span<const float> keep, size_t pixels) {
 }
 }  // namespace
 
-double mask_total_variation(std::span<const float> alpha, int width, int height, float lambda,
-                            std::span<float> d_alpha, std::span<const float> keep) {
+double mask_total_variation(std::span<const float> alpha, int width, int height, float lambda, std::span<float> d_alpha,
+                            std::span<const float> keep) {
   const size_t pixels = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
   if (width < 0 || height < 0 || alpha.size() != pixels || d_alpha.size() != pixels ||
       (!keep.empty() && keep.size() != pixels))

@@ -15,7 +15,8 @@ double OpenSkyCells::share(int width, int height) const {
   for (int y = 0; y < rows; ++y)
     for (int x = 0; x < columns; ++x)
       if (open[size_t(y) * columns + x])
-        pixels += int64_t(std::max(0, std::min(cell, width - x * cell))) * std::max(0, std::min(cell, height - y * cell));
+        pixels +=
+            int64_t(std::max(0, std::min(cell, width - x * cell))) * std::max(0, std::min(cell, height - y * cell));
   return double(pixels) / (double(width) * height);
 }
 

@@ -13,15 +13,15 @@ TrainConfig preset_config(std::string_view name) {
   if (name == "fast") {
     // A 3,000-step preview (docs/METHOD.md §7, presets).
     c.iterations = 3000;
-    c.resolution_schedule = 1000;  // a third of the run at each of 1/4, 1/2 and full resolution
-    c.sh_degree_interval = 300;    // degree 3 by step 900, before full resolution, as the default by 3,000
+    c.resolution_schedule = 1000;           // a third of the run at each of 1/4, 1/2 and full resolution
+    c.sh_degree_interval = 300;             // degree 3 by step 900, before full resolution, as the default by 3,000
     c.background.sh_degree_interval = 150;  // half the static interval, as in the default
-    c.means_lr_decay_steps = 3000;  // positions settle by the end of this run, not of 30,000 steps
+    c.means_lr_decay_steps = 3000;          // positions settle by the end of this run, not of 30,000 steps
     c.densify.warmup = 200;
     c.densify.stop_split_at = 2500;        // the last 500 steps settle what densification added
     c.densify.stop_screen_size_at = 1000;  // the coarse third only, as the default's 4,000 ends early
     c.densify.reset_alpha_every = 10;      // opacity resets at steps 1,000 and 2,000 (30 would never fire)
-    c.distractors.owned_after = 1000;       // after the coarse third, as the default after its first level
+    c.distractors.owned_after = 1000;      // after the coarse third, as the default after its first level
     // Seeding from the warm-up on: a run this short has no step to wait for.
     c.distractors.seed_after = 0;
     c.distractors.seed_waits_after_reset = false;
@@ -37,7 +37,7 @@ TrainConfig preset_config(std::string_view name) {
     c.densify.inherit_moments = false;
     c.densify.camera_path.radius = 0.0f;     // no camera-path cull …
     c.densify.camera_path.blind_gap = 0.0f;  // … nor blind-gap cull
-    c.distractors.reference_pixels = 0;  // K = initial_count = 1,000 per view
+    c.distractors.reference_pixels = 0;      // K = initial_count = 1,000 per view
     c.distractors.lambda_explained = 0.0f;
     c.distractors.lambda_owned = 0.0f;
     c.distractors.refine_every_epochs = 10;
@@ -57,7 +57,7 @@ TrainConfig preset_config(std::string_view name) {
     c.appearance.lr_image = 1e-3f;    // the appendix's rate for the image embeddings
     c.background.lr_image = 1e-3f;
     c.appearance.test_start_from_best_look = false;  // the test-time fit from the mean look, as before
-    c.background.lambda_opaque = 0.0f;  // the authors' L_bg alone (docs/METHOD.md §11)
+    c.background.lambda_opaque = 0.0f;               // the authors' L_bg alone (docs/METHOD.md §11)
     return c;
   }
   std::string known;

@@ -14,8 +14,8 @@
 
 namespace desplat::settings {
 
-using Field = std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*,
-                           KernelIsa*>;
+using Field =
+    std::variant<int*, int64_t*, float*, bool*, uint64_t*, std::array<float, 3>*, TransientPointAction*, KernelIsa*>;
 
 // A numeric setting's allowed values: [lo, hi], with either end open. Integer settings are
 // also capped at their type's largest value. `note` says what a special value means.

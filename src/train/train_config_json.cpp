@@ -18,7 +18,8 @@ namespace desplat {
 // The action is written and read as its name; an unknown name is an error naming the setting.
 void to_json(nlohmann::json& j, const TransientPointAction& a) { j = to_string(a); }
 void from_json(const nlohmann::json& j, TransientPointAction& a) {
-  if (!j.is_string()) throw std::invalid_argument("config: init.transient_points must be a string (keep, drop or seed)");
+  if (!j.is_string())
+    throw std::invalid_argument("config: init.transient_points must be a string (keep, drop or seed)");
   a = transient_point_action_from_string(j.get<std::string>());
 }
 
@@ -26,7 +27,8 @@ void from_json(const nlohmann::json& j, TransientPointAction& a) {
 void to_json(nlohmann::json& j, const KernelIsa& isa) { j = kernel_isa_name(isa); }
 void from_json(const nlohmann::json& j, KernelIsa& isa) {
   const auto parsed = j.is_string() ? parse_kernel_isa(j.get<std::string>()) : std::nullopt;
-  if (!parsed) throw std::invalid_argument("config: kernel_isa must be auto, portable, avx2 or avx512 (got " + j.dump() + ")");
+  if (!parsed)
+    throw std::invalid_argument("config: kernel_isa must be auto, portable, avx2 or avx512 (got " + j.dump() + ")");
   isa = *parsed;
 }
 
@@ -35,7 +37,8 @@ namespace {
 using settings::Bounds;
 using settings::Setting;
 
-template <class T> constexpr bool kIsInteger = std::is_integral_v<T> && !std::is_same_v<T, bool>;
+template <class T>
+constexpr bool kIsInteger = std::is_integral_v<T> && !std::is_same_v<T, bool>;
 
 nlohmann::json::json_pointer pointer(const std::string& dotted) {
   std::string p = "/" + dotted;
@@ -47,8 +50,10 @@ nlohmann::json::json_pointer pointer(const std::string& dotted) {
 void collect_leaves(const nlohmann::json& j, const std::string& prefix, std::vector<std::string>& out) {
   for (auto it = j.begin(); it != j.end(); ++it) {
     const std::string key = prefix.empty() ? it.key() : prefix + "." + it.key();
-    if (it->is_object()) collect_leaves(*it, key, out);
-    else out.push_back(key);
+    if (it->is_object())
+      collect_leaves(*it, key, out);
+    else
+      out.push_back(key);
   }
 }
 
@@ -62,15 +67,18 @@ std::string show_end(double v) {
 }
 
 // [lo, hi] of a setting of type T: the table's bounds within what T holds.
-template <class T> std::pair<double, double> ends(const Bounds& b) {
+template <class T>
+std::pair<double, double> ends(const Bounds& b) {
   if constexpr (kIsInteger<T>)
-    return {std::max(b.lo, double(std::numeric_limits<T>::lowest())), std::min(b.hi, double(std::numeric_limits<T>::max()))};
+    return {std::max(b.lo, double(std::numeric_limits<T>::lowest())),
+            std::min(b.hi, double(std::numeric_limits<T>::max()))};
   return {b.lo, b.hi};
 }
 
 // What a numeric setting of type T allows: "an integer in [1, 2147483647]", "a number in
 // (0, 10^18] (0 freezes the group)".
-template <class T> std::string allowed(const Bounds& b) {
+template <class T>
+std::string allowed(const Bounds& b) {
   const auto [lo, hi] = ends<T>(b);
   std::string text = std::string(kIsInteger<T> ? "an integer in " : "a number in ") + (b.lo_open ? "(" : "[") +
                      show_end(lo) + ", " + show_end(hi) + (b.hi_open ? ")" : "]");
@@ -82,7 +90,8 @@ template <class T> std::string allowed(const Bounds& b) {
 // and (for an integer setting) whole.
 // `what` replaces the allowed range in the message (eval_background's "three numbers, each …").
 template <class T>
-void check_number(const char* name, const Bounds& b, long double v, const std::string& got, const std::string& what = "") {
+void check_number(const char* name, const Bounds& b, long double v, const std::string& got,
+                  const std::string& what = "") {
   // long double holds every 64-bit integer exactly: 10^18 + 1 is not 10^18.
   long double lo = b.lo, hi = b.hi;
   if constexpr (kIsInteger<T>) {
@@ -107,11 +116,16 @@ std::string range_of(const Setting& s) {
   return std::visit(
       [&](auto* p) -> std::string {
         using T = std::remove_pointer_t<decltype(p)>;
-        if constexpr (std::is_same_v<T, bool>) return "true or false";
-        else if constexpr (std::is_same_v<T, TransientPointAction>) return "keep, drop or seed";
-        else if constexpr (std::is_same_v<T, KernelIsa>) return "auto, portable, avx2 or avx512";
-        else if constexpr (std::is_same_v<T, std::array<float, 3>>) return "three numbers, each " + allowed<float>(s.bounds).substr(9);
-        else return allowed<T>(s.bounds);
+        if constexpr (std::is_same_v<T, bool>)
+          return "true or false";
+        else if constexpr (std::is_same_v<T, TransientPointAction>)
+          return "keep, drop or seed";
+        else if constexpr (std::is_same_v<T, KernelIsa>)
+          return "auto, portable, avx2 or avx512";
+        else if constexpr (std::is_same_v<T, std::array<float, 3>>)
+          return "three numbers, each " + allowed<float>(s.bounds).substr(9);
+        else
+          return allowed<T>(s.bounds);
       },
       s.field);
 }
@@ -120,38 +134,48 @@ std::string type_of(const Setting& s) {
   return std::visit(
       [](auto* p) -> std::string {
         using T = std::remove_pointer_t<decltype(p)>;
-        if constexpr (std::is_same_v<T, bool>) return "boolean";
-        else if constexpr (kIsInteger<T>) return "integer";
-        else if constexpr (std::is_same_v<T, float>) return "number";
-        else if constexpr (std::is_same_v<T, std::array<float, 3>>) return "[number, number, number]";
-        else return "string";
+        if constexpr (std::is_same_v<T, bool>)
+          return "boolean";
+        else if constexpr (kIsInteger<T>)
+          return "integer";
+        else if constexpr (std::is_same_v<T, float>)
+          return "number";
+        else if constexpr (std::is_same_v<T, std::array<float, 3>>)
+          return "[number, number, number]";
+        else
+          return "string";
       },
       s.field);
 }
 
 // Reads one setting from its JSON value, range-checking the value as written (before any
 // conversion could wrap or round it).
-template <class T> void read_value(const Setting& s, const nlohmann::json& v, T& out) {
+template <class T>
+void read_value(const Setting& s, const nlohmann::json& v, T& out) {
   if constexpr (std::is_same_v<T, bool>) {
     if (!v.is_boolean())
       throw std::invalid_argument(std::string("config: ") + s.name + " must be true or false (got " + v.dump() + ")");
     out = v.get<bool>();
   } else if constexpr (std::is_same_v<T, std::array<float, 3>>) {
     if (!v.is_array() || v.size() != 3 || !std::all_of(v.begin(), v.end(), [](const auto& e) { return e.is_number(); }))
-      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + range_of(s) + " (got " + v.dump() + ")");
+      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + range_of(s) + " (got " + v.dump() +
+                                  ")");
     for (size_t k = 0; k < 3; ++k) {
       check_number<float>(s.name, s.bounds, v[k].get<double>(), v[k].dump(), range_of(s));
       out[k] = v[k].get<float>();
     }
   } else if constexpr (std::is_arithmetic_v<T>) {
     if (!v.is_number())
-      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + allowed<T>(s.bounds) + " (got " + v.dump() + ")");
+      throw std::invalid_argument(std::string("config: ") + s.name + " must be " + allowed<T>(s.bounds) + " (got " +
+                                  v.dump() + ")");
     const long double value = v.is_number_unsigned()  ? (long double)v.get<uint64_t>()
                               : v.is_number_integer() ? (long double)v.get<int64_t>()
                                                       : (long double)v.get<double>();
     check_number<T>(s.name, s.bounds, value, v.dump());
-    if constexpr (kIsInteger<T>) out = v.is_number_float() ? static_cast<T>(v.get<double>()) : v.get<T>();
-    else out = v.get<T>();
+    if constexpr (kIsInteger<T>)
+      out = v.is_number_float() ? static_cast<T>(v.get<double>()) : v.get<T>();
+    else
+      out = v.get<T>();
   } else {
     out = v.get<T>();  // the enums' from_json above
   }
@@ -183,7 +207,8 @@ void validate_config(const TrainConfig& c) {
           if constexpr (std::is_same_v<T, std::array<float, 3>>) {
             for (const float v : *p) check_number<float>(s.name, s.bounds, v, show_value(v), range_of(s));
           } else if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
-            check_number<T>(s.name, s.bounds, (long double)*p, kIsInteger<T> ? std::to_string(*p) : show_value(double(*p)));
+            check_number<T>(s.name, s.bounds, (long double)*p,
+                            kIsInteger<T> ? std::to_string(*p) : show_value(double(*p)));
           }
         },
         s.field);

@@ -21,7 +21,8 @@ TrainableGaussians::TrainableGaussians(GaussianSet initial) : params(std::move(i
 int TrainableGaussians::floats_per_gaussian(ParamGroup g) const { return group_width(param_group(g), params); }
 
 namespace {
-template <typename T> void keep_rows(std::vector<T>& v, int stride, const std::vector<uint8_t>& keep) {
+template <typename T>
+void keep_rows(std::vector<T>& v, int stride, const std::vector<uint8_t>& keep) {
   size_t out = 0;
   for (size_t i = 0; i < keep.size(); ++i) {
     if (!keep[i]) continue;
@@ -169,10 +170,14 @@ bool adam_rows(float* p, float* m, float* v, const float* g, int64_t rows, int s
 bool adam_sh_rows(float* p, float* m, float* v, const float* g, int64_t rows, int stride, int width,
                   const float* lane_step, float sqrt_bc2, const AdamSettings& a) {
   switch (width) {
-    case 3: return adam_rows<3>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
-    case 12: return adam_rows<12>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
-    case 48: return adam_rows<48>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
-    default: return adam_rows<0>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
+    case 3:
+      return adam_rows<3>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
+    case 12:
+      return adam_rows<12>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
+    case 48:
+      return adam_rows<48>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
+    default:
+      return adam_rows<0>(p, m, v, g, rows, stride, width, lane_step, sqrt_bc2, a);
   }
 }
 }  // namespace
@@ -204,8 +209,7 @@ bool row_finite(const float* p, const float* m, const float* v, int width) {
 }  // namespace
 
 void TrainableGaussians::adam_update(const RasterGradients& grads, const LearningRates& lr, const AdamSettings& adam,
-                                     int trained_color_floats, std::span<const uint8_t> rows_to_update,
-                                     int views) {
+                                     int trained_color_floats, std::span<const uint8_t> rows_to_update, int views) {
   if (views < 1) throw std::logic_error("adam_update: a step covers at least one view");
   const AdamBiasCorrection bc = advance_adam_step(adam_step, adam, views);
   const AdamSettings a = batch_adam_settings(adam, views);
@@ -290,8 +294,8 @@ void TrainableGaussians::check_consistent() const {
   for (int g = 0; g < kParamGroups; ++g) {
     const size_t want = n * floats_per_gaussian(ParamGroup(g));
     if (param(ParamGroup(g)).size() != want || adam_m[g].size() != want || adam_v[g].size() != want)
-      throw std::logic_error(std::string("parameter group ") + kParamGroupTable[g].name + " is out of step with " + std::to_string(n) +
-                             " Gaussians");
+      throw std::logic_error(std::string("parameter group ") + kParamGroupTable[g].name + " is out of step with " +
+                             std::to_string(n) + " Gaussians");
   }
   if (absgrad_sum.size() != n || visible_count.size() != n || max_screen_radius.size() != n)
     throw std::logic_error("densification statistics are out of step with the Gaussians");

@@ -3,12 +3,12 @@
 // distractors' growth (trainer_distractor_growth.cpp) (docs/METHOD.md §4–7).
 #include "desplat/train/trainer.hpp"
 
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <numeric>
-#include <omp.h>
 #include <stdexcept>
 
 #include "desplat/train/background.hpp"
@@ -98,7 +98,8 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
         throw std::invalid_argument("view " + v.name + ": its mask must hold only 0 (ignore) and 1 (use)");
       // A view with no kept pixel has nothing to train on and no score (its PSNR would be 0/0).
       if (std::none_of(v.keep.begin(), v.keep.end(), [](uint8_t k) { return k == 1; }))
-        throw std::invalid_argument("view " + v.name + ": its mask keeps no pixel (it is all black), so the view has "
+        throw std::invalid_argument("view " + v.name +
+                                    ": its mask keeps no pixel (it is all black), so the view has "
                                     "nothing to train on or score; fix the mask, or leave the view out");
     }
   // SSIM (the loss, the evaluation) needs 11×11 pixels, at the coarsest level of the
@@ -112,9 +113,10 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
       where += ", and " + std::to_string(w) + "x" + std::to_string(h) + " px in the first steps (the resolution " +
                "schedule starts at 1/" + std::to_string(factor) + ", num_downscales " +
                std::to_string(config_.num_downscales) + ")";
-    throw std::invalid_argument(std::string(kind) + " view " + v.name + " is " + where + ": the SSIM loss needs at least " +
-                                std::to_string(kSsimWindow) + "x" + std::to_string(kSsimWindow) +
-                                " px; use a smaller --downscale" + (factor > 1 ? " or a lower num_downscales" : ""));
+    throw std::invalid_argument(std::string(kind) + " view " + v.name + " is " + where +
+                                ": the SSIM loss needs at least " + std::to_string(kSsimWindow) + "x" +
+                                std::to_string(kSsimWindow) + " px; use a smaller --downscale" +
+                                (factor > 1 ? " or a lower num_downscales" : ""));
   };
   for (const TrainView& v : data_.train) check_size(v, coarsest, "training");
   for (const TrainView& v : data_.test) check_size(v, 1, "test");
@@ -139,14 +141,16 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     // Only the (off by default) distractor size rule needs it; the camera path has it already
     // when its own rule is on.
     if (config_.distractors.enabled && config_.distractors.size_threshold_at_scene_depth)
-      scene_depth_ = camera_path_.median_depth > 0 ? camera_path_.median_depth : median_scene_depth(cameras, data_.points);
+      scene_depth_ =
+          camera_path_.median_depth > 0 ? camera_path_.median_depth : median_scene_depth(cameras, data_.points);
   }
   if (config_.distractors.enabled) {
     std::vector<Camera> cameras;
     for (const TrainView& v : data_.train) cameras.push_back(v.camera);
     check_initial_distractors(cameras, config_.distractors);
     distractors_.reserve(data_.train.size());
-    for (const TrainView& v : data_.train) distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
+    for (const TrainView& v : data_.train)
+      distractors_.emplace_back(init_distractors(v.camera, config_.distractors, rng_()));
     if (config_.transient_points.action == TransientPointAction::seed && transient_point_count > 0)
       seed_from_transient_points(transient);
     view_static_unexplained.assign(data_.train.size(), 0.0f);
@@ -291,16 +295,15 @@ StepStats Trainer::step() {
   const int64_t event = update_static(views, profile, stats);
 
   // Each view's seeding, then every view's refinement when it is due in this batch.
-  const bool refine_distractors_now =
-      event >= 0 && distractor_refine_due(event, static_cast<int>(data_.train.size()), config_.densify, config_.distractors);
+  const bool refine_distractors_now = event >= 0 && distractor_refine_due(event, static_cast<int>(data_.train.size()),
+                                                                          config_.densify, config_.distractors);
   if (config_.distractors.enabled)
     for (BatchView& bv : batch_views_)
       if (view_seed_due[bv.view]) profile.time(&StepTimings::distractor, [&] { stats.reseeded += seed_if_due(bv); });
   if (refine_distractors_now) {
     const BatchView& at = batch_views_[size_t(event - step_)];
-    profile.time(&StepTimings::distractor, [&] {
-      refine_all_distractors(event, std::max(at.camera.width, at.camera.height), at.factor, stats);
-    });
+    profile.time(&StepTimings::distractor,
+                 [&] { refine_all_distractors(event, std::max(at.camera.width, at.camera.height), at.factor, stats); });
   }
   stats.timings = profile.timings;
   stats.gaussians = gaussians_.size();

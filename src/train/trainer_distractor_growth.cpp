@@ -39,7 +39,8 @@ void Trainer::refine_all_distractors(int64_t index, int image_size, int factor, 
         d = TrainableGaussians(std::move(empty));
       }
     }
-    const bool starved = ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
+    const bool starved =
+        ds.reseed_starved_views && distractor_buffer_starved(d.size(), view_static_unexplained[v], pixels);
     const bool uncovered = ds.seed_uncovered && uncovered_seed_count(d.size(), view_static_unexplained[v],
                                                                      view_composite_unexplained[v], pixels, ds) > 0;
     view_seed_due[v] = index < config_.densify.stop_split_at && seeding_settled(index) && (starved || uncovered);
@@ -65,7 +66,8 @@ void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) 
       m = 1;
     }
     if (count == 0) continue;
-    const GaussianSet seeds = reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
+    const GaussianSet seeds =
+        reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
     distractors_[v].append(seeds);
     transient_seeded += int64_t(seeds.size());
   }
@@ -131,8 +133,8 @@ int64_t Trainer::seed_if_due(BatchView& bv) {
     const int64_t wanted = distractor_cap(view_static_unexplained[view], full_pixels, capped);
     count = std::min<int64_t>(distractor_count_for(full, ds), wanted) - int64_t(d.size());
   } else if (ds.seed_uncovered) {
-    count = uncovered_seed_count(d.size(), view_static_unexplained[view], view_composite_unexplained[view],
-                                 full_pixels, ds);
+    count = uncovered_seed_count(d.size(), view_static_unexplained[view], view_composite_unexplained[view], full_pixels,
+                                 ds);
   }
   if (count <= 0) return 0;
   erode_mask(bv.uncovered, cam.width, cam.height);

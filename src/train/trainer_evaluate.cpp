@@ -17,7 +17,8 @@ FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& bac
   LayerPass pass;
   const bool recolor = config_.appearance.enabled && !look.appearance.empty();
   pass.render(gaussians_, camera, raster_settings(), recolor ? &appearance_ : nullptr, look.appearance);
-  if (!config_.background.enabled || look.background.empty()) return composite_over_background(pass.forward, background);
+  if (!config_.background.enabled || look.background.empty())
+    return composite_over_background(pass.forward, background);
   BackgroundPass sky;
   sky.forward(background_, look.background, camera, config_.background.sh_degree_at(step_), config_.threads);
   return composite_over_background(pass.forward, sky.background());
@@ -25,11 +26,12 @@ FloatImage Trainer::render(const Camera& camera, const std::array<float, 3>& bac
 
 const char* to_string(EvalProtocol p) {
   return p == EvalProtocol::appearance_halves ? "per-image embeddings fitted on the left half, scored on the right half"
-                                               : "full image";
+                                              : "full image";
 }
 
 ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) const {
-  if (!has_per_image_models()) throw std::invalid_argument("fit_look: this model has no per-image appearance or background");
+  if (!has_per_image_models())
+    throw std::invalid_argument("fit_look: this model has no per-image appearance or background");
   const Camera& cam = view.camera;
   const size_t pixels = size_t(cam.width) * cam.height;
   if (fit.size() != pixels) throw std::invalid_argument("fit_look: the fit mask does not match view " + view.name);
@@ -38,8 +40,8 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     for (size_t p = 0; p < pixels; ++p) keep[p] *= view.keep[p];
   const FloatImage photo = to_float(view.image);
   const bool recolor = config_.appearance.enabled, sky = config_.background.enabled;
-  ViewLook look = config_.appearance.test_start_from_best_look ? training_look(best_training_look(view, fit))
-                                                               : mean_look();
+  ViewLook look =
+      config_.appearance.test_start_from_best_look ? training_look(best_training_look(view, fit)) : mean_look();
   const bool shared = shared_embedding();
   std::vector<float> m_a(look.appearance.size(), 0.0f), v_a(m_a), m_b(look.background.size(), 0.0f), v_b(m_b);
   const RasterSettings rs = raster_settings();
@@ -49,7 +51,9 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
   LayerPass pass;
   BackgroundPass sky_pass;
   std::vector<float> composite(3 * pixels), d_composite(3 * pixels);
-  auto finite = [](const std::vector<float>& g) { return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); }); };
+  auto finite = [](const std::vector<float>& g) {
+    return std::all_of(g.begin(), g.end(), [](float x) { return std::isfinite(x); });
+  };
   for (int step = 1; step <= as.test_steps; ++step) {
     pass.render(gaussians_, cam, rs, recolor ? &appearance_ : nullptr, look.appearance);
     if (sky) sky_pass.forward(background_, look.background, cam, bg_degree, config_.threads);
@@ -62,7 +66,8 @@ ViewLook Trainer::fit_look(const TrainView& view, std::span<const float> fit) co
     composite_layers_backward(pass.layer(), Layer{}, bg, d_composite,
                               {pass.d_color, pass.d_alpha, {}, {}, sky_pass.d_image});
     const double bc1 = 1.0 - std::pow(double(adam.beta1), step);
-    const float step_size = float(as.test_lr / bc1), sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
+    const float step_size = float(as.test_lr / bc1),
+                sqrt_bc2 = float(std::sqrt(1.0 - std::pow(double(adam.beta2), step)));
     if (sky) sky_pass.backward(background_, look.background, cam, config_.threads);
     if (recolor) {
       pass.backward(gaussians_, cam, rs, &appearance_, look.appearance);
@@ -126,7 +131,8 @@ size_t Trainer::best_training_look(const TrainView& view, std::span<const float>
   double best_loss = std::numeric_limits<double>::infinity();
   for (size_t j = 0; j < data_.train.size(); ++j) {
     const FloatImage img = render(cam, config_.eval_background, training_look(j));
-    const double loss = photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, config_.ssim_lambda, {}, keep).loss;
+    const double loss =
+        photometric_loss(img.pixels, photo.pixels, cam.width, cam.height, config_.ssim_lambda, {}, keep).loss;
     if (loss < best_loss) best_loss = loss, best = j;  // the first of equals: the lowest index
   }
   return best;

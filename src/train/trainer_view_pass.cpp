@@ -54,9 +54,9 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
   profile.time(&StepTimings::forward, [&] { static_pass_.render(gaussians_, cam, rs, look, embedding); });
   const double appearance_forward = static_pass_.appearance_seconds;
   stats.static_pairs += static_pass_.forward.evaluated_pairs;
-  stats.static_visible += size_t(std::count(static_pass_.forward.visible.begin(), static_pass_.forward.visible.end(), 1));
-  if (distractors)
-    profile.time(&StepTimings::distractor, [&] { distractor_pass_.render(*distractors, cam, rs); });
+  stats.static_visible +=
+      size_t(std::count(static_pass_.forward.visible.begin(), static_pass_.forward.visible.end(), 1));
+  if (distractors) profile.time(&StepTimings::distractor, [&] { distractor_pass_.render(*distractors, cam, rs); });
 
   // 2. Composite, loss, and the loss's gradient with respect to each layer (docs/METHOD.md §4).
   profile.time(&StepTimings::loss, [&] {
@@ -136,8 +136,7 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
       if (!appearance_.adam_update(static_pass_.appearance.d_mlp, d_embeddings_))
         warn("step " + std::to_string(t) + ": the appearance model's gradient is not finite; its update was skipped");
     });
-  if (distractors)
-    profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
+  if (distractors) profile.time(&StepTimings::distractor, [&] { distractor_pass_.backward(*distractors, cam, rs); });
 
   // 4. The static statistics of this view, and its distractors' own Adam step.
   profile.time(&StepTimings::optimizer, [&] {
@@ -146,13 +145,15 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
     // have a gradient).
     if (config_.selective_adam) {
       const std::vector<uint8_t>& visible = static_pass_.forward.visible;
-      if (first) batch_visible_.assign(visible.begin(), visible.end());
+      if (first)
+        batch_visible_.assign(visible.begin(), visible.end());
       else
         for (size_t i = 0; i < visible.size(); ++i) batch_visible_[i] |= visible[i];
     }
     // Behind this view's distractor mask a static Gaussian is not seen (hide_behind_distractors).
     const bool hide_behind = distractors && config_.densify.stats.hide_behind_distractors;
-    hide_unseen_centers(static_pass_.forward, keep, hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
+    hide_unseen_centers(static_pass_.forward, keep,
+                        hide_behind ? distractor_pass_.forward.alpha : std::span<const float>());
     if (t < config_.densify.stop_split_at) {
       // Judged per pixel the static layer is seen on (gradient_per_seen_pixel).
       const float seen_scale = distractors && config_.densify.stats.gradient_per_seen_pixel
@@ -161,8 +162,10 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
       gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats, seen_scale);
     }
     // The batch's static gradient: the first view's, plus each further view's.
-    if (first) std::swap(batch_grads_, static_pass_.grads);
-    else add_gradients(batch_grads_, static_pass_.grads);
+    if (first)
+      std::swap(batch_grads_, static_pass_.grads);
+    else
+      add_gradients(batch_grads_, static_pass_.grads);
   });
   // The view's distractor buffer (its statistics are kept after densification stops:
   // culling unseen distractors needs them).

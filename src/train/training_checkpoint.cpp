@@ -1,8 +1,8 @@
 // Names of the checkpoint arrays, for a prefix P = "static" or "distractor/<train view index>":
 // "P/<group>", "P/adam_m/<group>", "P/adam_v/<group>", "P/stats/<name>"; and
 // "trainer/view_order", and per training view (distractors on) "trainer/view_static_unexplained",
-// "trainer/view_composite_unexplained", "trainer/view_seed_due". Per-set scalars (Adam step, statistics flag) are in the metadata:
-// "adam_step"/"statistics_empty"/"feature_dim" for the static set, and with the appearance model
+// "trainer/view_composite_unexplained", "trainer/view_seed_due". Per-set scalars (Adam step, statistics flag) are in
+// the metadata: "adam_step"/"statistics_empty"/"feature_dim" for the static set, and with the appearance model
 // "appearance/mlp", "appearance/image_embeddings" and their "appearance/adam_m/…", "…/adam_v/…"
 // with metadata "appearance": {"views", "image_dim", "fourier_frequencies", "hidden_width",
 // "hidden_layers", "adam_step"}; with the background model the same under "background/…" and
@@ -22,8 +22,9 @@ std::string distractor_prefix(size_t view) { return "distractor/" + std::to_stri
 
 // Restored state is never trusted: every value read below is checked against what the run can
 // use, and a misfit is one CheckpointError naming the file, the field and what to do.
-constexpr const char* kDamaged = ": the checkpoint is damaged or not this run's; resume from an intact copy, or train "
-                                 "anew with --overwrite";
+constexpr const char* kDamaged =
+    ": the checkpoint is damaged or not this run's; resume from an intact copy, or train "
+    "anew with --overwrite";
 
 [[noreturn]] void refuse(const Checkpoint& c, const std::string& what) {
   throw CheckpointError(c.source.string() + ": " + what + kDamaged);
@@ -129,9 +130,10 @@ std::string scene_difference(const nlohmann::json& recorded, const nlohmann::jso
 // range-checked, so a misfit cannot crash the run, but another scene cannot be told apart.
 void check_scene(const Trainer& trainer, const Checkpoint& c) {
   if (!c.metadata.contains("scene")) {
-    std::printf("warning: %s records no scene (it was written by an older desplat), so it cannot be checked to "
-                "belong to this one; resuming it as this scene's\n",
-                c.source.c_str());
+    std::printf(
+        "warning: %s records no scene (it was written by an older desplat), so it cannot be checked to "
+        "belong to this one; resuming it as this scene's\n",
+        c.source.c_str());
     return;
   }
   const std::string diff = scene_difference(c.metadata.at("scene"), scene_record(trainer.data()));
@@ -143,7 +145,8 @@ void check_scene(const Trainer& trainer, const Checkpoint& c) {
 
 // The arrays of a per-image model (AppearanceModel, BackgroundModel): "P/mlp",
 // "P/image_embeddings" and their "P/adam_m/…", "P/adam_v/…".
-template <class Model> void put_per_image_model(Checkpoint& c, const std::string& prefix, const Model& m) {
+template <class Model>
+void put_per_image_model(Checkpoint& c, const std::string& prefix, const Model& m) {
   const uint64_t views = m.views(), dim = uint64_t(m.settings.image_dim), weights = m.mlp.size();
   c.put(prefix + "/mlp", {weights}, m.mlp);
   c.put(prefix + "/adam_m/mlp", {weights}, m.mlp_m);
@@ -154,7 +157,8 @@ template <class Model> void put_per_image_model(Checkpoint& c, const std::string
 }
 
 // `m.settings` must be set (it gives the shapes).
-template <class Model> void get_per_image_model(const Checkpoint& c, const std::string& prefix, size_t views, Model& m) {
+template <class Model>
+void get_per_image_model(const Checkpoint& c, const std::string& prefix, size_t views, Model& m) {
   const uint64_t weights = m.mlp_floats(), dim = uint64_t(m.settings.image_dim);
   m.mlp = finite_array(c, prefix + "/mlp", {weights});
   m.mlp_m = finite_array(c, prefix + "/adam_m/mlp", {weights});
@@ -181,7 +185,8 @@ void put_trainable(Checkpoint& c, const std::string& prefix, const TrainableGaus
 
 // A group the checkpoint may lack: features, in checkpoints from before the appearance model
 // (always of width 0 there).
-bool absent_featureless(const Checkpoint& c, const std::string& name, const ParamGroupInfo& info, const GaussianSet& g) {
+bool absent_featureless(const Checkpoint& c, const std::string& name, const ParamGroupInfo& info,
+                        const GaussianSet& g) {
   return info.id == ParamGroup::Features && g.feature_dim == 0 && !c.contains(name);
 }
 
@@ -191,7 +196,8 @@ GaussianSet get_params(const Checkpoint& c, const std::string& prefix, ColorMode
   g.color_mode = mode;
   g.feature_dim = feature_dim;
   const CheckpointArray& opacities = c.array(prefix + "/opacity_logits");
-  if (opacities.shape().empty()) refuse(c, "array '" + prefix + "/opacity_logits' is a scalar, not one row per Gaussian");
+  if (opacities.shape().empty())
+    refuse(c, "array '" + prefix + "/opacity_logits' is a scalar, not one row per Gaussian");
   const uint64_t n = opacities.shape()[0];
   for (const ParamGroupInfo& info : kParamGroupTable) {
     const std::string name = prefix + "/" + info.name;
@@ -388,8 +394,8 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
                             " of " + std::to_string(want.hidden_width));
     if (appearance_views_in_checkpoint(c).size() != trainer.data().train.size())
       throw CheckpointError(c.source.string() + ": the checkpoint's appearance model has embeddings for " +
-                            std::to_string(appearance_views_in_checkpoint(c).size()) + " training views, this run has " +
-                            std::to_string(trainer.data().train.size()));
+                            std::to_string(appearance_views_in_checkpoint(c).size()) +
+                            " training views, this run has " + std::to_string(trainer.data().train.size()));
     look.settings = want;  // rates and test-time settings are the run's
     trainer.mutable_appearance() = std::move(look);
   }
@@ -443,7 +449,8 @@ void restore_training_checkpoint(Trainer& trainer, const Checkpoint& c) {
     at += std::to_string(v);
     at += ']';
     distractors[v].adam_step = integer_value(c, d.at("adam_step").at(v), "distractors.adam_step" + at, 0, step);
-    distractors[v].statistics_empty = bool_value(c, d.at("statistics_empty").at(v), "distractors.statistics_empty" + at);
+    distractors[v].statistics_empty =
+        bool_value(c, d.at("statistics_empty").at(v), "distractors.statistics_empty" + at);
   }
   // Checkpoints from before the growth rules (docs/METHOD.md §7, growth control) lack the per-view residual:
   // it is then re-measured at each view's next step.

@@ -11,9 +11,12 @@ namespace desplat {
 
 std::string to_string(TransientPointAction action) {
   switch (action) {
-    case TransientPointAction::keep: return "keep";
-    case TransientPointAction::drop: return "drop";
-    case TransientPointAction::seed: return "seed";
+    case TransientPointAction::keep:
+      return "keep";
+    case TransientPointAction::drop:
+      return "drop";
+    case TransientPointAction::seed:
+      return "seed";
   }
   return "keep";
 }

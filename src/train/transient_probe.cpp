@@ -27,8 +27,8 @@ std::vector<std::vector<int>> neighbours_of(const std::vector<ProbeView>& views,
       const auto au = axis_of(views[u].camera);
       if (av[0] * au[0] + av[1] * au[1] + av[2] * au[2] < min_cos) continue;
       const auto cu = views[u].camera.center();
-      const double d2 = std::pow(double(cu[0]) - cv[0], 2) + std::pow(double(cu[1]) - cv[1], 2) +
-                        std::pow(double(cu[2]) - cv[2], 2);
+      const double d2 =
+          std::pow(double(cu[0]) - cv[0], 2) + std::pow(double(cu[1]) - cv[1], 2) + std::pow(double(cu[2]) - cv[2], 2);
       near.emplace_back(d2, int(u));
     }
     std::sort(near.begin(), near.end());

@@ -41,7 +41,7 @@ ViewResidual measure_view_residual(Layer statics, Layer distractor, std::span<co
   const bool penalize = (penalties.lambda_explained > 0 || penalties.lambda_owned > 0) && has_distractor;
   if (penalize && (distractor.alpha.size() != pixels || d_distractor_alpha.size() != pixels))
     throw std::invalid_argument("measure_view_residual: distractor layer size differs");
-  if (mask) mask->resize(pixels);  // every pixel is written below
+  if (mask) mask->resize(pixels);         // every pixel is written below
   thread_local std::vector<uint8_t> cls;  // reused from step to step: no per-step allocation
   cls.resize(pixels);
   ViewResidual r;

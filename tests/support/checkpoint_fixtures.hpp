@@ -3,8 +3,8 @@
 // bytes from the documented layout.
 #pragma once
 
-#include <gmock/gmock.h>
 #include <fcntl.h>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/file.h>
@@ -103,11 +103,11 @@ inline Checkpoint small_checkpoint() {
       {"mixed", {1, 2.5, "x", nullptr, true}},
   };
   c.put<float>("static/means", {2, 3},
-               {0.1f, -0.0f, 1e-45f, std::numeric_limits<float>::infinity(),
-                -std::numeric_limits<float>::infinity(), std::bit_cast<float>(0x7fc01234u)});
+               {0.1f, -0.0f, 1e-45f, std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                std::bit_cast<float>(0x7fc01234u)});
   c.put<float>("static/adam_m/means", {2, 3},
-               {std::bit_cast<float>(0xff800001u), std::bit_cast<float>(0x7f800001u),
-                std::numeric_limits<float>::min(), -1.5f, std::numeric_limits<float>::max(), 3.0f});
+               {std::bit_cast<float>(0xff800001u), std::bit_cast<float>(0x7f800001u), std::numeric_limits<float>::min(),
+                -1.5f, std::numeric_limits<float>::max(), 3.0f});
   c.put<std::int32_t>("static/ids", {4}, {std::numeric_limits<std::int32_t>::min(), -1, 0, 2147483647});
   c.put<std::uint8_t>("distractor/17/mask", {2, 2, 1}, {0, 1, 128, 255});
   c.put<std::uint64_t>("step_counter", {}, {std::numeric_limits<std::uint64_t>::max()});  // a scalar
@@ -137,8 +137,7 @@ inline Checkpoint training_checkpoint(std::size_t n, int views, std::uint64_t se
     c.put<std::uint8_t>("distractor/" + std::to_string(v) + "/mask", {40, 60},
                         std::vector<std::uint8_t>(40 * 60, static_cast<std::uint8_t>(v)));
   }
-  c.put<std::int32_t>("density/grad_count", {n},
-                      std::vector<std::int32_t>(n, static_cast<std::int32_t>(seed)));
+  c.put<std::int32_t>("density/grad_count", {n}, std::vector<std::int32_t>(n, static_cast<std::int32_t>(seed)));
   c.metadata["rng"] = save_rng_state(rng);
   return c;
 }

@@ -100,7 +100,7 @@ inline std::string error_of(const std::function<void()>& f) {
 
 // Checks that reading fails with a message naming `file` and containing every fragment.
 inline void expect_error(const std::function<void()>& f, const fs::path& file,
-                  std::initializer_list<std::string_view> fragments) {
+                         std::initializer_list<std::string_view> fragments) {
   const std::string msg = error_of(f);
   EXPECT_NE(msg.find(file.string()), std::string::npos) << "message lacks the file: " << msg;
   for (std::string_view frag : fragments)
@@ -109,9 +109,7 @@ inline void expect_error(const std::function<void()>& f, const fs::path& file,
 
 // ---- Model comparison (doubles bit for bit) -----------------------------------------------
 
-inline bool same_bits(double a, double b) {
-  return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b);
-}
+inline bool same_bits(double a, double b) { return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b); }
 
 template <size_t N>
 inline bool same_bits(const std::array<double, N>& a, const std::array<double, N>& b) {
@@ -122,16 +120,14 @@ inline bool same_bits(const std::array<double, N>& a, const std::array<double, N
 
 inline ::testing::AssertionResult identical(const Model& a, const Model& b) {
   using ::testing::AssertionFailure;
-  if (a.cameras.size() != b.cameras.size() || a.images.size() != b.images.size() ||
-      a.points.size() != b.points.size())
-    return AssertionFailure() << "sizes differ: cameras " << a.cameras.size() << "/"
-                              << b.cameras.size() << ", images " << a.images.size() << "/"
-                              << b.images.size() << ", points " << a.points.size() << "/"
+  if (a.cameras.size() != b.cameras.size() || a.images.size() != b.images.size() || a.points.size() != b.points.size())
+    return AssertionFailure() << "sizes differ: cameras " << a.cameras.size() << "/" << b.cameras.size() << ", images "
+                              << a.images.size() << "/" << b.images.size() << ", points " << a.points.size() << "/"
                               << b.points.size();
   for (auto ia = a.cameras.begin(), ib = b.cameras.begin(); ia != a.cameras.end(); ++ia, ++ib) {
     const Camera &x = ia->second, &y = ib->second;
-    bool same = ia->first == ib->first && x.id == y.id && x.model == y.model &&
-                x.width == y.width && x.height == y.height && x.params.size() == y.params.size();
+    bool same = ia->first == ib->first && x.id == y.id && x.model == y.model && x.width == y.width &&
+                x.height == y.height && x.params.size() == y.params.size();
     for (size_t k = 0; same && k < x.params.size(); ++k) same = same_bits(x.params[k], y.params[k]);
     if (!same) return AssertionFailure() << "camera " << ia->first << " differs";
   }
@@ -167,22 +163,19 @@ inline bool colmap_on_path() {
 }
 
 // `colmap model_converter in -> out` (out is created; colmap requires it to exist).
-inline ::testing::AssertionResult colmap_convert(const fs::path& in, const fs::path& out,
-                                          const char* type) {
+inline ::testing::AssertionResult colmap_convert(const fs::path& in, const fs::path& out, const char* type) {
   if (!colmap_on_path())
-    return ::testing::AssertionFailure()
-           << "the `colmap` executable is not on PATH: run scripts/install_deps.sh "
-              "(it installs COLMAP 3.8, which this test needs)";
+    return ::testing::AssertionFailure() << "the `colmap` executable is not on PATH: run scripts/install_deps.sh "
+                                            "(it installs COLMAP 3.8, which this test needs)";
   fs::create_directories(out);
   const fs::path log = out.string() + ".log";
   // Offscreen Qt: harmless for model_converter, and safe if a build ever wants a display.
-  const std::string cmd = "QT_QPA_PLATFORM=offscreen colmap model_converter --input_path '" +
-                          in.string() + "' --output_path '" + out.string() +
-                          "' --output_type " + type + " > '" + log.string() + "' 2>&1";
+  const std::string cmd = "QT_QPA_PLATFORM=offscreen colmap model_converter --input_path '" + in.string() +
+                          "' --output_path '" + out.string() + "' --output_type " + type + " > '" + log.string() +
+                          "' 2>&1";
   const int status = std::system(cmd.c_str());
   if (status != 0)
-    return ::testing::AssertionFailure()
-           << "`" << cmd << "` exited with status " << status << ":\n" << slurp(log);
+    return ::testing::AssertionFailure() << "`" << cmd << "` exited with status " << status << ":\n" << slurp(log);
   return ::testing::AssertionSuccess();
 }
 
@@ -195,16 +188,23 @@ struct ExpectedModel {
   int num_params;
 };
 inline constexpr ExpectedModel kExpectedModels[] = {
-    {0, "SIMPLE_PINHOLE", 3}, {1, "PINHOLE", 4},         {2, "SIMPLE_RADIAL", 4},
-    {3, "RADIAL", 5},         {4, "OPENCV", 8},          {5, "OPENCV_FISHEYE", 8},
-    {6, "FULL_OPENCV", 12},   {7, "FOV", 5},             {8, "SIMPLE_RADIAL_FISHEYE", 4},
-    {9, "RADIAL_FISHEYE", 5}, {10, "THIN_PRISM_FISHEYE", 12},
+    {0, "SIMPLE_PINHOLE", 3},
+    {1, "PINHOLE", 4},
+    {2, "SIMPLE_RADIAL", 4},
+    {3, "RADIAL", 5},
+    {4, "OPENCV", 8},
+    {5, "OPENCV_FISHEYE", 8},
+    {6, "FULL_OPENCV", 12},
+    {7, "FOV", 5},
+    {8, "SIMPLE_RADIAL_FISHEYE", 4},
+    {9, "RADIAL_FISHEYE", 5},
+    {10, "THIN_PRISM_FISHEYE", 12},
 };
 
 // Doubles that a sloppy text or binary path would alter: thirds, −0, a subnormal, extremes.
-inline constexpr double kAwkward[] = {512.3333333333334, 1.0 / 3.0,  -0.0,  4.9406564584124654e-324,
-                               1e-300,           -2.5e-7,     1e300, 0.1,
-                               123456789.123456789, -7.0 / 3.0, 2.0 / 3.0, 1e-5};
+inline constexpr double kAwkward[] = {512.3333333333334, 1.0 / 3.0, -0.0, 4.9406564584124654e-324, 1e-300,
+                                      -2.5e-7,           1e300,     0.1,  123456789.123456789,     -7.0 / 3.0,
+                                      2.0 / 3.0,         1e-5};
 
 inline std::array<double, 4> unit_quat(double w, double x, double y, double z) {
   const double n = std::sqrt(w * w + x * x + y * y + z * z);
@@ -226,10 +226,15 @@ inline Model make_model() {
   m.cameras[4000000000u] = Camera{4000000000u, CameraModelId::Pinhole, 1u << 20, 7, {1, 2, 3, 4}};
 
   const uint64_t big = (uint64_t{1} << 40) + 5;  // point ids are 64-bit
-  Image a{1, unit_quat(0.9, 0.1, -0.2, 0.3), {0.5, -1.0 / 3.0, 1e-300}, 100, "a.jpg",
+  Image a{1,
+          unit_quat(0.9, 0.1, -0.2, 0.3),
+          {0.5, -1.0 / 3.0, 1e-300},
+          100,
+          "a.jpg",
           {{1.5, 2.25, 7}, {3, 4, kNoPoint3D}, {5.125, 6.0 / 7.0, static_cast<int64_t>(big)}}};
-  Image b{4000000001u, unit_quat(-0.1, 0.7, 0.0, -0.7), {1e6, 2, -0.0}, 4000000000u, "sub/b.png",
-          {{0.0, -0.0, static_cast<int64_t>(big)}, {639.99, 479.99, 7}}};
+  Image b{4000000001u,    unit_quat(-0.1, 0.7, 0.0, -0.7),
+          {1e6, 2, -0.0}, 4000000000u,
+          "sub/b.png",    {{0.0, -0.0, static_cast<int64_t>(big)}, {639.99, 479.99, 7}}};
   Image c{3, {1, 0, 0, 0}, {0, 0, 0}, 110, "c.jpg", {}};  // no observations
   for (Image* img : {&a, &b, &c}) m.images[img->id] = *img;
 

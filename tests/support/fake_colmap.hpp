@@ -39,7 +39,6 @@ inline sfm::SfmError expect_error(const sfm::SfmOptions& o, SfmErrorKind kind) {
   return sfm::SfmError(SfmErrorKind::BadOptions, "");
 }
 
-
 // ---- A fake colmap -----------------------------------------------------------------------
 
 // Behaviour is picked with environment variables so each test sets only what it needs:

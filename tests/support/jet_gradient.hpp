@@ -14,13 +14,15 @@ namespace desplat::test {
 // Parameters flattened group by group, in the parameter-group table's order.
 inline std::vector<float> flatten_params(const GaussianSet& g) {
   std::vector<float> p;
-  for (const ParamGroupInfo& info : kParamGroupTable) p.insert(p.end(), (g.*info.values).begin(), (g.*info.values).end());
+  for (const ParamGroupInfo& info : kParamGroupTable)
+    p.insert(p.end(), (g.*info.values).begin(), (g.*info.values).end());
   return p;
 }
 
 inline std::vector<float> flatten_grads(const RasterGradients& gr) {
   std::vector<float> p;
-  for (const ParamGroupInfo& info : kParamGroupTable) p.insert(p.end(), (gr.*info.grads).begin(), (gr.*info.grads).end());
+  for (const ParamGroupInfo& info : kParamGroupTable)
+    p.insert(p.end(), (gr.*info.grads).begin(), (gr.*info.grads).end());
   return p;
 }
 

@@ -18,7 +18,8 @@
 
 namespace desplat::test {
 
-template <typename T> struct RefGaussians {
+template <typename T>
+struct RefGaussians {
   std::vector<T> means, log_scales, quats, opacity_logits, colors;
   std::vector<T> features;  // the appearance features; the render never reads them
   ColorMode color_mode = ColorMode::SphericalHarmonics;
@@ -32,7 +33,8 @@ template <typename T> struct RefGaussians {
   }
 };
 
-template <typename T> RefGaussians<T> to_ref(const GaussianSet& g) {
+template <typename T>
+RefGaussians<T> to_ref(const GaussianSet& g) {
   auto conv = [](const std::vector<float>& v) { return std::vector<T>(v.begin(), v.end()); };
   RefGaussians<T> r;
   r.means = conv(g.means);
@@ -45,7 +47,8 @@ template <typename T> RefGaussians<T> to_ref(const GaussianSet& g) {
   return r;
 }
 
-template <typename T> struct RefImage {
+template <typename T>
+struct RefImage {
   std::vector<T> color, alpha, depth;  // [H,W,3], [H,W], [H,W]
   // 1 where some blending decision (α ≥ 1/255, T·(1 − α) ≤ 1e-4) lies within a
   // relative 1e-4 of its threshold: float32 rounding may legitimately decide it the
@@ -53,9 +56,12 @@ template <typename T> struct RefImage {
   std::vector<uint8_t> near_threshold;  // [H,W]
 };
 
-template <typename T> double value_of(const T& v) {
-  if constexpr (std::is_arithmetic_v<T>) return static_cast<double>(v);
-  else return v.a;
+template <typename T>
+double value_of(const T& v) {
+  if constexpr (std::is_arithmetic_v<T>)
+    return static_cast<double>(v);
+  else
+    return v.a;
 }
 
 template <typename T>
@@ -99,9 +105,8 @@ RefImage<T> reference_render(const RefGaussians<T>& g, const Camera& cam, const 
   // std::stable_sort's temporary buffer does not provide.
   std::vector<int> order(splats.size());
   std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
-    return value_of(splats[a].depth) < value_of(splats[b].depth);
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return value_of(splats[a].depth) < value_of(splats[b].depth); });
 
   RefImage<T> img;
   const size_t pixels = size_t(cam.width) * cam.height;
@@ -122,8 +127,7 @@ RefImage<T> reference_render(const RefGaussians<T>& g, const Camera& cam, const 
         using std::exp;
         const T alpha = clamp_alpha<T>(sp.opacity * exp(-sigma));
         const T next = trans * (T(1) - alpha);
-        if (near(value_of(alpha), kAlphaMin) || near(value_of(next), kTransmittanceMin))
-          img.near_threshold[pix] = 1;
+        if (near(value_of(alpha), kAlphaMin) || near(value_of(next), kTransmittanceMin)) img.near_threshold[pix] = 1;
         if (alpha < T(kAlphaMin)) continue;
         if (next <= T(kTransmittanceMin)) break;
         for (int ch = 0; ch < 3; ++ch) img.color[3 * pix + ch] += sp.rgb[ch] * alpha * trans;

@@ -19,8 +19,8 @@
 #include "desplat/io/scene.hpp"
 #include "desplat/io/undistort.hpp"
 #include "support/expect.hpp"
-#include "support/look_at.hpp"
 #include "support/fox_scene.hpp"
+#include "support/look_at.hpp"
 #include "support/temp_dir.hpp"
 
 namespace scene_test {
@@ -107,7 +107,9 @@ inline FloatImage pattern_image(int w, int h, unsigned seed) {
   return img;
 }
 
-FloatImage constant_image(int w, int h, float v) { return FloatImage{w, h, 3, std::vector<float>(size_t(w) * h * 3, v)}; }
+FloatImage constant_image(int w, int h, float v) {
+  return FloatImage{w, h, 3, std::vector<float>(size_t(w) * h * 3, v)};
+}
 
 // A small capture: `n` cameras on a ring looking at the origin, images named img_<i>.png.
 struct Synthetic {
@@ -141,11 +143,12 @@ inline Synthetic synthetic_model(CameraModelId lens, int n, int w, int h, int po
 }
 
 // Writes the capture to dir: images/ (and the model) in the nerfstudio layout.
-inline Synthetic write_synthetic(const fs::path& dir, CameraModelId lens = CameraModelId::Pinhole, int n = 4, int w = 64,
-                          int h = 48, int points = 20) {
+inline Synthetic write_synthetic(const fs::path& dir, CameraModelId lens = CameraModelId::Pinhole, int n = 4,
+                                 int w = 64, int h = 48, int points = 20) {
   Synthetic s = synthetic_model(lens, n, w, h, points);
   colmap::write_model_binary(s.model, dir / "sparse/0");
-  for (size_t i = 0; i < s.names.size(); ++i) write_image(dir / "images" / s.names[i], pattern_image(w, h, unsigned(i)));
+  for (size_t i = 0; i < s.names.size(); ++i)
+    write_image(dir / "images" / s.names[i], pattern_image(w, h, unsigned(i)));
   return s;
 }
 

@@ -14,7 +14,10 @@ namespace desplat::test {
 inline void write_scene_folder(const std::filesystem::path& dir, const TrainingData& data) {
   colmap::Model model;
   const Camera& c0 = data.train.at(0).camera;
-  model.cameras[1] = {1, colmap::CameraModelId::Pinhole, uint64_t(c0.width), uint64_t(c0.height),
+  model.cameras[1] = {1,
+                      colmap::CameraModelId::Pinhole,
+                      uint64_t(c0.width),
+                      uint64_t(c0.height),
                       {double(c0.fx), double(c0.fy), double(c0.cx), double(c0.cy)}};
   uint32_t id = 1;
   for (const auto* list : {&data.train, &data.test})

@@ -24,19 +24,18 @@ inline Camera random_camera(std::mt19937& rng, int width, int height, float foca
   const float angle = std::sqrt(ax * ax + ay * ay + az * az);
   const float kx = ax / angle, ky = ay / angle, kz = az / angle;
   const float c = std::cos(angle), s = std::sin(angle), v = 1 - c;
-  cam.R_cw = {c + kx * kx * v,      kx * ky * v - kz * s, kx * kz * v + ky * s,
-              ky * kx * v + kz * s, c + ky * ky * v,      ky * kz * v - kx * s,
-              kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v};
+  cam.R_cw = {c + kx * kx * v,      kx * ky * v - kz * s, kx * kz * v + ky * s, ky * kx * v + kz * s, c + ky * ky * v,
+              ky * kz * v - kx * s, kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v};
   cam.t_cw = {u(rng), u(rng), 4.0f + u(rng)};
   return cam;
 }
 
 struct SceneSpec {
   int count = 20;
-  float spread = 1.5f;                      // half-width of the cube around the origin
+  float spread = 1.5f;  // half-width of the cube around the origin
   float log_scale_min = -2.5f, log_scale_max = -0.5f;
   float logit_min = -2.0f, logit_max = 3.0f;
-  float sh_sigma = 0.3f;                    // std-dev of SH coefficients
+  float sh_sigma = 0.3f;  // std-dev of SH coefficients
   int sh_degree = 3;
   ColorMode mode = ColorMode::SphericalHarmonics;
 };

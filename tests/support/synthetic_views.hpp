@@ -1,6 +1,7 @@
 // A small scene with known ground truth for training tests: a ground-truth Gaussian
 // set rendered from cameras on a circle of radius 1 (the scale docs/METHOD.md §1's
-// normalization gives real captures, so default learning rates and thresholds apply). Every 4th camera is a held-out test view.
+// normalization gives real captures, so default learning rates and thresholds apply). Every 4th camera is a held-out
+// test view.
 #pragma once
 
 #include <cmath>
@@ -71,8 +72,8 @@ inline TrainingData synthetic_training_data(int views, int width, int height, un
   std::mt19937 rng(seed + 1);
   std::normal_distribution<float> noise(0.0f, 0.012f);
   for (size_t i = 0; i < truth.size(); ++i) {
-    data.points.push_back({truth.means[3 * i] + noise(rng), truth.means[3 * i + 1] + noise(rng),
-                           truth.means[3 * i + 2] + noise(rng)});
+    data.points.push_back(
+        {truth.means[3 * i] + noise(rng), truth.means[3 * i + 1] + noise(rng), truth.means[3 * i + 2] + noise(rng)});
     std::array<uint8_t, 3> rgb;
     for (int k = 0; k < 3; ++k)
       rgb[k] = uint8_t(std::lround(std::clamp(truth.colors[3 * i + k] * 0.28209479f + 0.5f, 0.0f, 1.0f) * 255));

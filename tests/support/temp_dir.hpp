@@ -16,7 +16,8 @@ class TempDir {
  public:
   // `tag` only makes the name readable in a leftover listing: /tmp/desplat_<tag>_XXXXXX.
   explicit TempDir(std::string_view tag = "test") {
-    std::string pattern = (std::filesystem::temp_directory_path() / ("desplat_" + std::string(tag) + "_XXXXXX")).string();
+    std::string pattern =
+        (std::filesystem::temp_directory_path() / ("desplat_" + std::string(tag) + "_XXXXXX")).string();
     if (::mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + pattern);
     path_ = pattern;
   }
@@ -29,7 +30,8 @@ class TempDir {
     for (auto it = std::filesystem::recursive_directory_iterator(path_, ec);
          !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
       if (it->is_directory(ec) && !it->is_symlink(ec))
-        std::filesystem::permissions(it->path(), std::filesystem::perms::owner_all, std::filesystem::perm_options::add, ec);
+        std::filesystem::permissions(it->path(), std::filesystem::perms::owner_all, std::filesystem::perm_options::add,
+                                     ec);
     std::filesystem::remove_all(path_, ec);
   }
 

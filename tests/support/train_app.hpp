@@ -5,12 +5,12 @@
 
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imageio.h>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
-#include <OpenImageIO/imageio.h>
+#include <set>
 
 #include "desplat/io/atomic_file.hpp"
 #include "desplat/io/ply.hpp"

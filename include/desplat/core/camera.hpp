@@ -13,8 +13,8 @@
 namespace desplat {
 
 struct Camera {
-  float fx = 0, fy = 0;  // focal lengths [px]
-  float cx = 0, cy = 0;  // principal point [px]
+  float fx = 0, fy = 0;       // focal lengths [px]
+  float cx = 0, cy = 0;       // principal point [px]
   int width = 0, height = 0;  // image size [px]
   // World-to-camera rotation, row-major 3×3 (R_cw[3*r + c]).
   std::array<float, 9> R_cw{1, 0, 0, 0, 1, 0, 0, 0, 1};

@@ -39,9 +39,7 @@ struct GaussianView {
   int sh_degree = 0;  // stored SH degree (0..3); ignored in RGB mode
 
   std::size_t size() const { return opacity_logits.size(); }
-  int color_floats_per_gaussian() const {
-    return color_mode == ColorMode::RGB ? 3 : 3 * sh_coeff_count(sh_degree);
-  }
+  int color_floats_per_gaussian() const { return color_mode == ColorMode::RGB ? 3 : 3 * sh_coeff_count(sh_degree); }
   // Throws std::invalid_argument when array sizes disagree with N or the SH degree
   // is outside [0, 3].
   void validate() const;
@@ -58,9 +56,7 @@ struct GaussianSet {
   std::size_t size() const { return opacity_logits.size(); }
   // Resizes every array for n Gaussians (new entries zero, quaternions identity).
   void resize(std::size_t n);
-  GaussianView view() const {
-    return {means, log_scales, quats, opacity_logits, colors, color_mode, sh_degree};
-  }
+  GaussianView view() const { return {means, log_scales, quats, opacity_logits, colors, color_mode, sh_degree}; }
 };
 
 }  // namespace desplat

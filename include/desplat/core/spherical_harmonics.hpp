@@ -18,7 +18,8 @@ constexpr int sh_coefficients(int degree) { return (degree + 1) * (degree + 1); 
 
 // Fills Y[0 .. sh_coefficients(min(degree, MaxDegree))) for the unit direction (x, y, z).
 // MaxDegree (≤ kMaxShDegree) is the size Y was declared for: the Gaussians' colours stop at 3.
-template <typename T, int MaxDegree = 3> void sh_basis(int degree, T x, T y, T z, T* Y) {
+template <typename T, int MaxDegree = 3>
+void sh_basis(int degree, T x, T y, T z, T* Y) {
   static_assert(MaxDegree >= 0 && MaxDegree <= kMaxShDegree);
   Y[0] = T(kShBand0);
   if (degree < 1) return;

@@ -13,7 +13,7 @@ namespace desplat {
 
 struct WorldNormalization {
   std::array<double, 3> center{0, 0, 0};  // [original units]
-  double scale = 1;                        // normalized units per original unit
+  double scale = 1;                       // normalized units per original unit
 
   std::array<double, 3> to_normalized(const std::array<double, 3>& p) const {
     return {(p[0] - center[0]) * scale, (p[1] - center[1]) * scale, (p[2] - center[2]) * scale};

@@ -48,8 +48,7 @@ class AtomicWriteError : public std::system_error {
 // Throws AtomicWriteError for I/O errors (including a concurrent writer of the same path).
 // If only the final directory fsync fails, `path` already holds the new contents and the
 // error says so.
-void write_file_atomically(const std::filesystem::path& path,
-                           const std::function<void(std::ostream&)>& writer);
+void write_file_atomically(const std::filesystem::path& path, const std::function<void(std::ostream&)>& writer);
 
 // Convenience for contents that are already in memory.
 void write_file_atomically(const std::filesystem::path& path, std::string_view bytes);

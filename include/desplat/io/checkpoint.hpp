@@ -72,8 +72,8 @@ enum class ArrayType : std::uint8_t { Float32 = 1, Int32 = 2, UInt8 = 3, UInt64 
 const char* array_type_name(ArrayType type);  // "float32", ...
 
 template <class T>
-concept CheckpointElement = std::same_as<T, float> || std::same_as<T, std::int32_t> ||
-                            std::same_as<T, std::uint8_t> || std::same_as<T, std::uint64_t>;
+concept CheckpointElement = std::same_as<T, float> || std::same_as<T, std::int32_t> || std::same_as<T, std::uint8_t> ||
+    std::same_as<T, std::uint64_t>;
 
 // Array names: 1..255 printable ASCII characters other than space, e.g. "static/means",
 // "static/adam_m/means", "distractor/17/rgb".
@@ -94,12 +94,14 @@ class CheckpointArray {
 
   ArrayType type() const;
   const Shape& shape() const { return shape_; }
-  std::size_t size() const;        // elements
-  std::size_t byte_size() const;   // size() * element size
-  const void* data() const;        // the elements' bytes, row-major
+  std::size_t size() const;       // elements
+  std::size_t byte_size() const;  // size() * element size
+  const void* data() const;       // the elements' bytes, row-major
 
   template <CheckpointElement T>
-  bool holds() const { return std::holds_alternative<std::vector<T>>(values_); }
+  bool holds() const {
+    return std::holds_alternative<std::vector<T>>(values_);
+  }
   // Throws CheckpointError when T is not the stored element type.
   template <CheckpointElement T>
   const std::vector<T>& values() const {
@@ -112,10 +114,14 @@ class CheckpointArray {
 
   template <CheckpointElement T>
   static constexpr ArrayType element_type_of() {
-    if constexpr (std::same_as<T, float>) return ArrayType::Float32;
-    else if constexpr (std::same_as<T, std::int32_t>) return ArrayType::Int32;
-    else if constexpr (std::same_as<T, std::uint8_t>) return ArrayType::UInt8;
-    else return ArrayType::UInt64;
+    if constexpr (std::same_as<T, float>)
+      return ArrayType::Float32;
+    else if constexpr (std::same_as<T, std::int32_t>)
+      return ArrayType::Int32;
+    else if constexpr (std::same_as<T, std::uint8_t>)
+      return ArrayType::UInt8;
+    else
+      return ArrayType::UInt64;
   }
 
  private:
@@ -123,8 +129,7 @@ class CheckpointArray {
   [[noreturn]] void throw_type_mismatch(ArrayType wanted) const;
 
   Shape shape_{0};
-  std::variant<std::vector<float>, std::vector<std::int32_t>, std::vector<std::uint8_t>,
-               std::vector<std::uint64_t>>
+  std::variant<std::vector<float>, std::vector<std::int32_t>, std::vector<std::uint8_t>, std::vector<std::uint64_t>>
       values_;
 };
 

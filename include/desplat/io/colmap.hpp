@@ -95,7 +95,7 @@ struct Image {
   std::array<double, 4> qvec_wxyz{1, 0, 0, 0};  // world-to-camera rotation (w, x, y, z)
   std::array<double, 3> tvec{0, 0, 0};          // world-to-camera translation [world units]
   uint32_t camera_id = 0;
-  std::string name;  // image file path relative to the image folder
+  std::string name;                   // image file path relative to the image folder
   std::vector<Observation> points2d;  // indexed by TrackElement::point2d_idx
   friend bool operator==(const Image&, const Image&) = default;
 };
@@ -164,6 +164,5 @@ struct ModelPaths {
 // listed in that point's track). Messages start with the path of the file the bad record
 // belongs to.
 void validate_model(const Model& model, const ModelPaths& paths);
-
 
 }  // namespace desplat::colmap

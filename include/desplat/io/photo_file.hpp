@@ -8,9 +8,9 @@
 // Errors throw ImageError naming the file.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
-#include <array>
 #include <memory>
 #include <string>
 
@@ -22,8 +22,8 @@ namespace desplat {
 struct PhotoMetadata;  // the file's header, defined in photo_file.cpp
 
 struct PhotoFile {
-  FloatImage image;                              // channels as stored
-  std::string format;                            // e.g. "jpeg", "png"
+  FloatImage image;    // channels as stored
+  std::string format;  // e.g. "jpeg", "png"
   std::shared_ptr<const PhotoMetadata> metadata;
 };
 

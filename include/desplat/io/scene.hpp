@@ -59,11 +59,11 @@
 #include <vector>
 
 #include "desplat/core/camera.hpp"
+#include "desplat/core/world_frame.hpp"
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/image_io.hpp"
 #include "desplat/io/splits.hpp"
 #include "desplat/io/undistort.hpp"
-#include "desplat/core/world_frame.hpp"
 
 namespace desplat {
 
@@ -76,34 +76,34 @@ using WarningSink = std::function<void(const std::string&)>;
 void report_warning(const WarningSink& sink, const std::string& message);
 
 struct SceneOptions {
-  int downscale = 1;                  // 1, 2, 4, 8, … (any integer ≥ 1)
-  std::filesystem::path cache_dir;    // empty: default_cache_dir()
-  SplitOptions split;                 // default: every 8th image (by name) is a test view
-  UndistortOptions undistort;         // default: COLMAP image_undistorter's defaults
-  WarningSink on_warning;             // empty: "desplat: warning: …" on stderr
+  int downscale = 1;                // 1, 2, 4, 8, … (any integer ≥ 1)
+  std::filesystem::path cache_dir;  // empty: default_cache_dir()
+  SplitOptions split;               // default: every 8th image (by name) is a test view
+  UndistortOptions undistort;       // default: COLMAP image_undistorter's defaults
+  WarningSink on_warning;           // empty: "desplat: warning: …" on stderr
   // The user's masks (masks.hpp). Empty: <data_dir>/masks when that folder exists, else none.
   // Given: the folder must exist (SceneError otherwise).
   std::filesystem::path masks_dir;
 };
 
 struct SceneView {
-  std::string name;                    // as in the model, relative to images/
-  std::filesystem::path image_path;    // the file the pixels come from (images/ or images_N/)
-  Camera camera;                       // undistorted pinhole, normalized world, training size
+  std::string name;                  // as in the model, relative to images/
+  std::filesystem::path image_path;  // the file the pixels come from (images/ or images_N/)
+  Camera camera;                     // undistorted pinhole, normalized world, training size
   bool is_test = false;
   uint32_t colmap_image_id = 0;
-  colmap::Camera distorted_camera;     // the photo's lens at the training size
-  colmap::Camera undistorted_camera;   // PINHOLE, training size (camera's intrinsics in double)
+  colmap::Camera distorted_camera;          // the photo's lens at the training size
+  colmap::Camera undistorted_camera;        // PINHOLE, training size (camera's intrinsics in double)
   int source_width = 0, source_height = 0;  // size of the pixels in image_path
   int photo_width = 0, photo_height = 0;    // the COLMAP camera's size: the photo in images/
-  std::filesystem::path mask_path;     // ground-truth distractor mask; empty when there is none
-  std::filesystem::path user_mask_path;  // the user's mask of pixels to ignore; empty when none
+  std::filesystem::path mask_path;          // ground-truth distractor mask; empty when there is none
+  std::filesystem::path user_mask_path;     // the user's mask of pixels to ignore; empty when none
 };
 
 struct Scene {
-  std::filesystem::path data_dir;      // absolute
-  std::filesystem::path masks_dir;     // absolute: the user's masks folder in use; empty when none
-  std::vector<SceneView> views;        // Train and Test views sorted by name; Unused ones left out
+  std::filesystem::path data_dir;                  // absolute
+  std::filesystem::path masks_dir;                 // absolute: the user's masks folder in use; empty when none
+  std::vector<SceneView> views;                    // Train and Test views sorted by name; Unused ones left out
   std::vector<std::array<float, 3>> points_xyz;    // [P] normalized frame
   std::vector<std::array<uint8_t, 3>> points_rgb;  // [P] 0..255
   std::vector<uint64_t> point_ids;                 // [P] COLMAP point3D ids, ascending
@@ -111,11 +111,11 @@ struct Scene {
   // which of `views` observe it (indices, ascending, each once).
   std::vector<uint32_t> point_track_images;
   std::vector<std::vector<uint32_t>> point_views;
-  WorldNormalization normalization;    // normalized = (original − center)·scale
+  WorldNormalization normalization;  // normalized = (original − center)·scale
   int downscale = 1;
-  std::filesystem::path cache_dir;     // absolute
-  std::vector<std::string> warnings;   // every warning issued while loading
-  WarningSink on_warning;              // for warnings of load_view_image
+  std::filesystem::path cache_dir;    // absolute
+  std::vector<std::string> warnings;  // every warning issued while loading
+  WarningSink on_warning;             // for warnings of load_view_image
 
   std::vector<size_t> train_views() const;  // indices into views
   std::vector<size_t> test_views() const;

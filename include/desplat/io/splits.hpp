@@ -58,9 +58,9 @@ enum class ViewRole { Train, Test, Unused };
 
 struct SplitOptions {
   SplitRule rule = SplitRule::EveryNth;
-  int every_nth = 8;                    // EveryNth only (other rules need the default)
-  std::filesystem::path train_list;     // NameLists only
-  std::filesystem::path test_list;      // NameLists only
+  int every_nth = 8;                 // EveryNth only (other rules need the default)
+  std::filesystem::path train_list;  // NameLists only
+  std::filesystem::path test_list;   // NameLists only
   // NameLists only: a list given as its names instead of a file (present, even if empty, = given).
   std::optional<std::vector<std::string>> train_names, test_names;
   std::optional<double> clutter_ratio;  // RobustNeRF only

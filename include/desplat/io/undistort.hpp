@@ -43,8 +43,7 @@ Vec2 undistort_pixel(const colmap::Camera& distorted, const colmap::Camera& undi
 // A SIMPLE_PINHOLE or PINHOLE `distorted` camera returns the image unchanged, without
 // resampling. Throws std::invalid_argument when the image size disagrees with `distorted`
 // or `undistorted` is not a PINHOLE camera.
-FloatImage undistort_image(const FloatImage& image, const colmap::Camera& distorted,
-                           const colmap::Camera& undistorted);
+FloatImage undistort_image(const FloatImage& image, const colmap::Camera& distorted, const colmap::Camera& undistorted);
 
 // Resizes with OpenCV's INTER_AREA (pixel-area averaging when shrinking).
 // Throws std::invalid_argument for a non-positive size or an inconsistent image.

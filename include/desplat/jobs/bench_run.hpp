@@ -51,7 +51,7 @@ namespace desplat {
 struct BenchRun {
   std::string name;
   nlohmann::json config = nlohmann::json::object();  // TrainConfig overrides
-  std::string preset;                                 // train/presets.hpp; empty: "default", grid's steps
+  std::string preset;                                // train/presets.hpp; empty: "default", grid's steps
   int downscale = 1;
 };
 

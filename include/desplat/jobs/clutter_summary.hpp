@@ -12,12 +12,12 @@
 namespace desplat {
 
 struct ClutterSummaryRow {
-  double clutter_ratio = 0;        // share of training views cluttered, [0, 1]
-  std::string run;                 // the DeSplat run
-  double psnr = 0, mask_iou = -1;  // its final test PSNR [dB] and mask IoU (-1: no masks)
-  double train_seconds = 0;        // its training wall time [s]
+  double clutter_ratio = 0;                              // share of training views cluttered, [0, 1]
+  std::string run;                                       // the DeSplat run
+  double psnr = 0, mask_iou = -1;                        // its final test PSNR [dB] and mask IoU (-1: no masks)
+  double train_seconds = 0;                              // its training wall time [s]
   double static_only_psnr = 0, static_only_seconds = 0;  // the static-only run, same scene
-  double clean_psnr = 0;           // the static-only run on the clutter-free scene
+  double clean_psnr = 0;                                 // the static-only run on the clutter-free scene
   // (psnr − static_only_psnr) / (clean_psnr − static_only_psnr); NaN when clutter does not
   // cost the baseline anything (clean_psnr ≤ static_only_psnr): nothing to recover.
   double recovered = 0;

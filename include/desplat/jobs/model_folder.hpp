@@ -30,11 +30,11 @@
 namespace desplat {
 
 struct SceneRecipe {
-  std::filesystem::path data_dir;              // absolute: images/ + sparse/0/
+  std::filesystem::path data_dir;  // absolute: images/ + sparse/0/
   int downscale = 1;
-  SplitOptions split;                          // as given to training (list and .tsv paths absolute)
+  SplitOptions split;                                // as given to training (list and .tsv paths absolute)
   std::vector<std::string> train_views, test_views;  // the split's outcome, in scene order
-  std::filesystem::path masks_dir;             // absolute: the user's masks in use; empty: none
+  std::filesystem::path masks_dir;                   // absolute: the user's masks in use; empty: none
 
   // The recipe of a loaded scene: its options plus the views the split gave.
   static SceneRecipe of(const Scene& scene, const std::filesystem::path& data_dir, const SceneOptions& options);

@@ -14,10 +14,10 @@ struct RenderRunOptions {
   // DeSplat model (each training view has its own distractors); test and novel views
   // have the static layer only. Layers are shown over the evaluation background.
   std::string layer = "static";
-  std::string views = "test";       // test | train | all | comma-separated image names
-  bool mask = false;    // also <name>_mask.png: the distractor mask A_d > 0.5 (training views)
-  bool alpha = false;   // write the layer as straight RGBA (alpha = the layer's coverage)
-  bool figure = false;  // also <name>_row.png: truth | static | distractor | composite | mask
+  std::string views = "test";  // test | train | all | comma-separated image names
+  bool mask = false;           // also <name>_mask.png: the distractor mask A_d > 0.5 (training views)
+  bool alpha = false;          // write the layer as straight RGBA (alpha = the layer's coverage)
+  bool figure = false;         // also <name>_row.png: truth | static | distractor | composite | mask
   // A training view's name: the static layer in that photo's appearance (models trained with
   // --effects …,appearance) over that photo's learned background (…,background). Empty: the
   // plain colours (what point_cloud.ply holds) over the evaluation background.

@@ -34,8 +34,8 @@ namespace desplat {
 struct RequestedSettings {
   TrainConfig config;
   nlohmann::json overrides = nlohmann::json::object();  // the --config settings as given
-  std::string preset;        // as named, or "default"
-  bool auto_effects = false; // --effects auto: step 4 decides the effects
+  std::string preset;                                   // as named, or "default"
+  bool auto_effects = false;                            // --effects auto: step 4 decides the effects
 };
 // Throws std::invalid_argument naming the option or setting, what is wrong and what to do.
 RequestedSettings request_settings(const TrainingRunOptions& options);
@@ -58,6 +58,7 @@ struct ResolvedSettings {
 // `stop_requested` interrupted the transient probe (nothing was written).
 std::optional<ResolvedSettings> resolve_settings(const RequestedSettings& requested, const TrainingRunOptions& options,
                                                  const TrainingData& data, const ModelFolder::Config* resumed,
-                                                 const std::string& record_name, const std::atomic<bool>& stop_requested);
+                                                 const std::string& record_name,
+                                                 const std::atomic<bool>& stop_requested);
 
 }  // namespace desplat

@@ -63,9 +63,9 @@ struct TrainingRunOptions {
   std::optional<int> downscale;
   SplitOptions split;
   std::filesystem::path masks_dir;  // the user's masks (masks.hpp); empty: <data>/masks if present
-  int eval_every = 0;        // 0: only at the end
+  int eval_every = 0;               // 0: only at the end
   int checkpoint_every = 1000;
-  int log_every = 100;       // plain-log interval when stdout is not a terminal
+  int log_every = 100;  // plain-log interval when stdout is not a terminal
 };
 
 // Returns the process exit code: 0 done, 130 interrupted (checkpoint written, or nothing

@@ -26,7 +26,8 @@
 namespace desplat {
 
 // One pixel channel before the clamp; a template so tests can differentiate it exactly.
-template <typename T> T composite_unclamped(T cs, T as, T cd, T ad, T bg) {
+template <typename T>
+T composite_unclamped(T cs, T as, T cd, T ad, T bg) {
   return cd + (T(1) - ad) * cs + (T(1) - ad) * (T(1) - as) * bg;
 }
 
@@ -38,7 +39,7 @@ struct Layer {
 // What lies behind both layers: one colour, or one per pixel. Does not own `pixels`.
 struct Background {
   std::array<float, 3> color{0, 0, 0};
-  std::span<const float> pixels;  // [P·3] when not empty (then `color` is unused)
+  std::span<const float> pixels;                           // [P·3] when not empty (then `color` is unused)
   Background(const std::array<float, 3>& c) : color(c) {}  // NOLINT: a colour is a background
   explicit Background(std::span<const float> per_pixel) : pixels(per_pixel) {}
   float at(size_t pixel, int channel) const { return pixels.empty() ? color[channel] : pixels[3 * pixel + channel]; }
@@ -72,11 +73,11 @@ FloatImage composite_over_background(const RasterOutput& render, const Backgroun
 
 // Every layer of one view as images over `background`, for figures and desplat_render.
 struct ViewLayers {
-  FloatImage statics;          // C_s + (1 − A_s)·bg
-  FloatImage distractor;       // C_d + (1 − A_d)·bg (the background alone without distractors)
-  FloatImage composite;        // the training-time composite
-  FloatImage static_alpha;     // [H, W, 1] A_s
-  FloatImage distractor_alpha; // [H, W, 1] A_d (zeros without distractors)
+  FloatImage statics;           // C_s + (1 − A_s)·bg
+  FloatImage distractor;        // C_d + (1 − A_d)·bg (the background alone without distractors)
+  FloatImage composite;         // the training-time composite
+  FloatImage static_alpha;      // [H, W, 1] A_s
+  FloatImage distractor_alpha;  // [H, W, 1] A_d (zeros without distractors)
 };
 // `distractors` may be null or empty (test views, culled views): no second pass is made.
 // `statics` is rendered with settings.active_sh_degree; distractors are RGB.

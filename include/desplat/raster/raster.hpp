@@ -64,7 +64,7 @@ struct RasterSettings {
   float eps2d = 0.3f;        // isotropic blur added to every 2D covariance [px²]
   // SH degree used for this render (≤ the stored degree); -1 means "the stored one".
   int active_sh_degree = -1;
-  int num_threads = 0;  // 0: OpenMP's default
+  int num_threads = 0;              // 0: OpenMP's default
   KernelIsa isa = KernelIsa::Auto;  // the pixel loops' instruction set (above)
 };
 
@@ -109,26 +109,26 @@ struct RasterOutput {
   int64_t evaluated_pairs = 0;
 
   // --- saved for backward ---
-  std::vector<float> rgb;                 // [N, 3] color after SH / clamp
-  std::vector<float> opacity;             // [N]    sigmoid(logit)
-  std::vector<float> scales;              // [N, 3] exp(log_scales), world units
-  std::vector<uint8_t> color_clamped;     // [N, 3] 1 where the color clamp was active
-  std::vector<int32_t> blend_radii;       // [N, 2] the extent [px] in which α can reach 1/255
-                                          // (≤ radii; opacity-dependent): tiles and rows visited
-  std::vector<TileSplat> splats;          // [N] the above and the row chords, packed for the
-                                          // pixel loops (complete for the Gaussians listed in
-                                          // a tile only)
-  std::vector<int32_t> tile_offsets;      // [tiles + 1] CSR offsets into tile_entries
-  std::vector<int32_t> tile_entries;      // [E] Gaussian ids, depth-sorted per tile
-  std::vector<int32_t> gaussian_offsets;  // [N + 1] each Gaussian's first gradient record
-  std::vector<int32_t> record_of_entry;   // [E] per tile entry, its gradient record: records
-                                          // are grouped by Gaussian, each group in tile order
-  std::vector<uint8_t> entry_blank;       // [E] 1 where the Gaussian's box reaches the tile but
-                                          // its chord no pixel row there (nothing to blend or
-                                          // to differentiate); set for the entries the forward
-                                          // walked, which include every one the backward walks
-  std::vector<float> final_transmittance; // [H, W]
-  std::vector<int32_t> last_contributor;  // [H, W] index within the tile list, −1: none
+  std::vector<float> rgb;                  // [N, 3] color after SH / clamp
+  std::vector<float> opacity;              // [N]    sigmoid(logit)
+  std::vector<float> scales;               // [N, 3] exp(log_scales), world units
+  std::vector<uint8_t> color_clamped;      // [N, 3] 1 where the color clamp was active
+  std::vector<int32_t> blend_radii;        // [N, 2] the extent [px] in which α can reach 1/255
+                                           // (≤ radii; opacity-dependent): tiles and rows visited
+  std::vector<TileSplat> splats;           // [N] the above and the row chords, packed for the
+                                           // pixel loops (complete for the Gaussians listed in
+                                           // a tile only)
+  std::vector<int32_t> tile_offsets;       // [tiles + 1] CSR offsets into tile_entries
+  std::vector<int32_t> tile_entries;       // [E] Gaussian ids, depth-sorted per tile
+  std::vector<int32_t> gaussian_offsets;   // [N + 1] each Gaussian's first gradient record
+  std::vector<int32_t> record_of_entry;    // [E] per tile entry, its gradient record: records
+                                           // are grouped by Gaussian, each group in tile order
+  std::vector<uint8_t> entry_blank;        // [E] 1 where the Gaussian's box reaches the tile but
+                                           // its chord no pixel row there (nothing to blend or
+                                           // to differentiate); set for the entries the forward
+                                           // walked, which include every one the backward walks
+  std::vector<float> final_transmittance;  // [H, W]
+  std::vector<int32_t> last_contributor;   // [H, W] index within the tile list, −1: none
   // The pixel-loop path rasterize_blend ran (resolved, never Auto); the backward runs the
   // same one, so it recomputes α bit-identically whatever its own settings say.
   KernelIsa isa = KernelIsa::Portable;
@@ -147,10 +147,10 @@ struct RasterGradients {
   // colour clamp's and rgb_scale's chain rule: what a caller that changed the colours between
   // rasterize_project and rasterize_blend needs for its own backward pass.
   std::vector<float> rgb;
-  std::vector<float> means2d;         // [N, 2] ∂L/∂μ2d (summed over pixels)
+  std::vector<float> means2d;  // [N, 2] ∂L/∂μ2d (summed over pixels)
   // Densification statistic (docs/METHOD.md §3): per Gaussian, the 2-norm of
   // (Σ_pixels |∂L/∂μ2d.x|, Σ_pixels |∂L/∂μ2d.y|) [loss units per px].
-  std::vector<float> absgrad;         // [N]
+  std::vector<float> absgrad;  // [N]
 
   // Scratch reused between calls: one gradient record per tile entry.
   std::vector<float> entry_scratch;
@@ -159,16 +159,16 @@ struct RasterGradients {
 // Renders `gaussians` seen from `camera`. Throws std::invalid_argument for bad input
 // (see GaussianView::validate, Camera::validate, active SH degree out of range).
 // rasterize_forward = rasterize_project, then rasterize_blend.
-void rasterize_forward(const GaussianView& gaussians, const Camera& camera,
-                       const RasterSettings& settings, RasterOutput& out);
+void rasterize_forward(const GaussianView& gaussians, const Camera& camera, const RasterSettings& settings,
+                       RasterOutput& out);
 
 // The forward pass in two stages, for a caller that changes the colours of the visible
 // Gaussians in between (the appearance model, docs/METHOD.md §10). rasterize_project fills
 // every per-Gaussian output (visible, means2d, conics, radii, depths, opacity, rgb = the colour
 // after SH and clamp); rasterize_blend bins the visible Gaussians and blends them with
 // out.rgb as it finds it. `camera` and `settings` must be the same for both.
-void rasterize_project(const GaussianView& gaussians, const Camera& camera,
-                       const RasterSettings& settings, RasterOutput& out);
+void rasterize_project(const GaussianView& gaussians, const Camera& camera, const RasterSettings& settings,
+                       RasterOutput& out);
 void rasterize_blend(const Camera& camera, const RasterSettings& settings, RasterOutput& out);
 
 // Gradients of a scalar loss L given ∂L/∂color [H,W,3], ∂L/∂alpha [H,W] and
@@ -177,9 +177,8 @@ void rasterize_blend(const Camera& camera, const RasterSettings& settings, Raste
 // `rgb_scale` [N, 3] or empty (= 1): when the caller replaced out.rgb between the stages by a
 // colour c̃ whose derivative with respect to the SH colour c is diagonal, ∂c̃/∂c per Gaussian and
 // channel; the colour gradients are then ∂L/∂c = rgb_scale ⊙ ∂L/∂c̃. grads.rgb holds ∂L/∂c̃.
-void rasterize_backward(const GaussianView& gaussians, const Camera& camera,
-                        const RasterSettings& settings, const RasterOutput& forward,
-                        std::span<const float> dL_dcolor, std::span<const float> dL_dalpha,
+void rasterize_backward(const GaussianView& gaussians, const Camera& camera, const RasterSettings& settings,
+                        const RasterOutput& forward, std::span<const float> dL_dcolor, std::span<const float> dL_dalpha,
                         std::span<const float> dL_ddepth, RasterGradients& grads,
                         std::span<const float> rgb_scale = {});
 

@@ -105,7 +105,7 @@ struct CaptureOrder {
   // Median RMS difference of the thumbnails (each pair at its best shift): of neighbours in
   // name order, and of photos half the capture apart.
   double neighbour_distance = 0, far_distance = 0;
-  std::string reason;             // for the log
+  std::string reason;  // for the log
 };
 
 // The thumbnail of an image: kOrderThumbnailValues floats, three planes (R, G, B; a grey image
@@ -196,14 +196,14 @@ struct SfmOptions {
   double min_registered_share = kDefaultMinRegisteredShare;
   // Run the escalation steps (run_sfm) when fewer than kEscalateBelowShare of the photos are placed.
   bool escalate = true;
-  int num_threads = -1;                 // colmap's: -1 = all cores
-  bool copy_images = false;             // copy the photos into <out>/images instead of a symlink
-  bool overwrite = false;               // replace database.db, sparse/ and the log of an earlier run
-  std::string colmap = "colmap";        // executable: a name looked up on PATH, or a path
+  int num_threads = -1;           // colmap's: -1 = all cores
+  bool copy_images = false;       // copy the photos into <out>/images instead of a symlink
+  bool overwrite = false;         // replace database.db, sparse/ and the log of an earlier run
+  std::string colmap = "colmap";  // executable: a name looked up on PATH, or a path
   // Seconds each colmap stage may run before it is stopped (SfmErrorKind::TimedOut); must be
   // > 0. nullopt: default_stage_time_limit for the stage and the number of photos.
   std::optional<double> stage_time_limit_s;
-  ProgressFn on_progress;               // may be empty
+  ProgressFn on_progress;  // may be empty
 };
 
 // A file or photo that was left out, and why (path relative to the images folder).
@@ -222,27 +222,27 @@ struct SfmAttempt {
 };
 
 struct SfmResult {
-  std::filesystem::path images_dir;  // <out>/images
-  std::filesystem::path sparse_dir;  // <out>/sparse/0
-  std::filesystem::path database;    // <out>/database.db
-  std::filesystem::path log;         // <out>/colmap.log
+  std::filesystem::path images_dir;       // <out>/images
+  std::filesystem::path sparse_dir;       // <out>/sparse/0
+  std::filesystem::path database;         // <out>/database.db
+  std::filesystem::path log;              // <out>/colmap.log
   Matcher matcher = Matcher::Exhaustive;  // as resolved
   std::string matcher_reason;             // why (for the log): "exhaustive: 50 photos, ..."
   CameraChoice cameras;                   // as resolved, with its reason
   std::vector<SfmAttempt> attempts;       // the first run, then each escalation step, in order
   std::string warning;                    // non-empty when fewer than kEscalateBelowShare are placed
-  int num_photos = 0;                // readable photos found and handed to colmap
-  std::vector<SkippedFile> skipped;  // files in the images folder that were not photos colmap can use
+  int num_photos = 0;                     // readable photos found and handed to colmap
+  std::vector<SkippedFile> skipped;       // files in the images folder that were not photos colmap can use
   // Photos handed to colmap that sparse/0 does not hold, each with the reason the other models
   // and colmap's database give (a separate model; too few features; no verified match; matched
   // but not placeable).
   std::vector<SkippedFile> unregistered;
   double mean_track_length = 0;        // images per 3D point of sparse/0
   double mean_reprojection_error = 0;  // px, colmap's per-point error averaged over sparse/0
-  int num_registered = 0;            // photos in sparse/0
-  int num_points = 0;                // 3D points in sparse/0
-  int num_models = 0;                // models mapper wrote
-  double seconds = 0;                // wall time of the whole run
+  int num_registered = 0;              // photos in sparse/0
+  int num_points = 0;                  // 3D points in sparse/0
+  int num_models = 0;                  // models mapper wrote
+  double seconds = 0;                  // wall time of the whole run
   double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // wall time of each stage
 };
 

@@ -34,8 +34,8 @@ struct ProcessExit {
 // SIGTERM, then SIGKILL 5 s later if it is still there, and the result is TimedOut; 0 means no
 // limit; negative is an error (std::invalid_argument). Throws SubprocessError when argv[0]
 // cannot be started (missing, not executable), naming it.
-ProcessExit run_subprocess(const std::vector<std::string>& argv,
-                           const std::function<void(std::string_view)>& on_output, double time_limit_seconds);
+ProcessExit run_subprocess(const std::vector<std::string>& argv, const std::function<void(std::string_view)>& on_output,
+                           double time_limit_seconds);
 
 // Absolute path of `name` (searched on PATH unless it contains '/'), if it is an executable file.
 std::optional<std::filesystem::path> find_executable(const std::string& name);

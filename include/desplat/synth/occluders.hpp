@@ -29,11 +29,11 @@ struct OccludeOptions {
   std::filesystem::path out_dir;   // must not be data_dir or inside it
   double fraction = 0.5;           // share of the training views that get occluders, [0, 1]
   uint64_t seed = 1;
-  double coverage_min = 0.05;      // covered share of an occluded view's pixels: 0 < min ≤ max ≤ 0.6
+  double coverage_min = 0.05;  // covered share of an occluded view's pixels: 0 < min ≤ max ≤ 0.6
   double coverage_max = 0.25;
-  int track_length = 1;            // consecutive training views that share one set of occluders, ≥ 1
-  SplitOptions split;              // which views are training views (default: every 8th is a test view)
-  bool overwrite = false;          // replace images/, sparse/, distractor_masks/, occluders.json in out_dir
+  int track_length = 1;    // consecutive training views that share one set of occluders, ≥ 1
+  SplitOptions split;      // which views are training views (default: every 8th is a test view)
+  bool overwrite = false;  // replace images/, sparse/, distractor_masks/, occluders.json in out_dir
 };
 
 // One pasted occluder. Kinds: "ellipse", "rectangle", "polygon" (opaque, one random colour),

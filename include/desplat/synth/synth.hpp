@@ -54,7 +54,7 @@ struct SynthError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-using Rgb = std::array<double, 3>;   // [0, 1]
+using Rgb = std::array<double, 3>;    // [0, 1]
 using Vec3d = std::array<double, 3>;  // world units
 
 // A procedural solid texture, evaluated at the 3D world position of a surface point.
@@ -62,7 +62,7 @@ struct TextureSpec {
   std::string kind = "noise";  // "solid" (color_a), "checker", "stripes", "noise" (fBm blend)
   Rgb color_a{0.8, 0.8, 0.8};
   Rgb color_b{0.3, 0.3, 0.3};
-  double scale = 4;   // pattern cells per world unit
+  double scale = 4;     // pattern cells per world unit
   double detail = 0.3;  // fBm modulation of brightness on top of the pattern, [0, 1]
   friend bool operator==(const TextureSpec&, const TextureSpec&) = default;
 };
@@ -70,41 +70,41 @@ struct TextureSpec {
 struct ObjectSpec {
   std::string shape = "box";  // "plane" (finite rectangle), "box", "sphere"
   Vec3d center{0, 0, 0};
-  Vec3d size{1, 1, 1};  // box: full extents along its axes; plane: extents along its two tangent
-                        // axes (size[2] unused); sphere: unused (radius)
-  double radius = 0.5;  // sphere only
+  Vec3d size{1, 1, 1};    // box: full extents along its axes; plane: extents along its two tangent
+                          // axes (size[2] unused); sphere: unused (radius)
+  double radius = 0.5;    // sphere only
   Vec3d normal{0, 0, 1};  // plane only: its normal (need not be unit length)
-  double yaw_deg = 0;   // box and plane: rotation about the world z axis (box) or the normal (plane)
+  double yaw_deg = 0;     // box and plane: rotation about the world z axis (box) or the normal (plane)
   TextureSpec texture;
   friend bool operator==(const ObjectSpec&, const ObjectSpec&) = default;
 };
 
 struct CameraSpec {
-  int width = 64, height = 48;  // [px]
-  double fov_x_deg = 60;        // horizontal field of view of the pinhole part; fy = fx
+  int width = 64, height = 48;                      // [px]
+  double fov_x_deg = 60;                            // horizontal field of view of the pinhole part; fy = fx
   std::array<double, 2> principal_offset_px{0, 0};  // principal point − image center [px]
-  std::string model = "PINHOLE";  // "PINHOLE" or "OPENCV"
-  std::array<double, 4> distortion{0, 0, 0, 0};  // OPENCV only: k1, k2, p1, p2
+  std::string model = "PINHOLE";                    // "PINHOLE" or "OPENCV"
+  std::array<double, 4> distortion{0, 0, 0, 0};     // OPENCV only: k1, k2, p1, p2
   friend bool operator==(const CameraSpec&, const CameraSpec&) = default;
 };
 
 struct ViewsSpec {
-  int count = 8;                 // all views; every 8th (k % 8 == 0) is a test view
-  std::string path = "orbit";    // "orbit" or "forward"
-  Vec3d target{0, 0, 0.3};       // every camera looks at this point
-  double radius = 4;             // orbit: horizontal distance to the target's axis; forward:
-                                 // distance from the path's centre to the target
-  double height = 2.5;           // camera height above the target (world z)
-  double arc_deg = 360;          // orbit: the arc the cameras span (360: a closed circle)
-  double start_deg = 0;          // azimuth of the first camera (orbit) or of the path (forward)
+  int count = 8;                           // all views; every 8th (k % 8 == 0) is a test view
+  std::string path = "orbit";              // "orbit" or "forward"
+  Vec3d target{0, 0, 0.3};                 // every camera looks at this point
+  double radius = 4;                       // orbit: horizontal distance to the target's axis; forward:
+                                           // distance from the path's centre to the target
+  double height = 2.5;                     // camera height above the target (world z)
+  double arc_deg = 360;                    // orbit: the arc the cameras span (360: a closed circle)
+  double start_deg = 0;                    // azimuth of the first camera (orbit) or of the path (forward)
   std::array<double, 2> spread{1.0, 0.5};  // forward: half-extents of the camera path (spiral)
-  double position_jitter = 0;    // uniform random offset of each camera centre [world units]
+  double position_jitter = 0;              // uniform random offset of each camera centre [world units]
   friend bool operator==(const ViewsSpec&, const ViewsSpec&) = default;
 };
 
 struct LightSpec {
   Vec3d direction{0.4, 0.3, 1.0};  // towards the light (need not be unit length)
-  double ambient = 0.35;            // share of light that reaches every surface
+  double ambient = 0.35;           // share of light that reaches every surface
   friend bool operator==(const LightSpec&, const LightSpec&) = default;
 };
 
@@ -127,20 +127,20 @@ struct SkySpec {  // a sky at infinity (depends on the ray direction only) inste
   friend bool operator==(const SkySpec&, const SkySpec&) = default;
 };
 
-struct DistractorSpec {  // per-view objects in front of the static scene, training views only
-  double clutter_ratio = 0;  // share of training views with distractors: round(ratio · #train),
-                             // spread evenly over the training views in name order
-  std::array<int, 2> per_view{1, 3};         // min, max objects in a cluttered view
-  std::array<double, 2> size{0.15, 0.35};    // object diameter as a fraction of the image height
-  std::array<double, 2> depth{0.3, 0.55};    // distance from the camera as a fraction of its
-                                             // distance to views.target
-  int track_length = 1;  // runs of this many consecutive training views show the same objects at
-                         // the same place in the frame (they move with the camera, as a hand or a
-                         // strap would), which no single 3D position explains; 1 = independent views
+struct DistractorSpec {                    // per-view objects in front of the static scene, training views only
+  double clutter_ratio = 0;                // share of training views with distractors: round(ratio · #train),
+                                           // spread evenly over the training views in name order
+  std::array<int, 2> per_view{1, 3};       // min, max objects in a cluttered view
+  std::array<double, 2> size{0.15, 0.35};  // object diameter as a fraction of the image height
+  std::array<double, 2> depth{0.3, 0.55};  // distance from the camera as a fraction of its
+                                           // distance to views.target
+  int track_length = 1;                    // runs of this many consecutive training views show the same objects at
+                                           // the same place in the frame (they move with the camera, as a hand or a
+                                           // strap would), which no single 3D position explains; 1 = independent views
   friend bool operator==(const DistractorSpec&, const DistractorSpec&) = default;
 };
 
-struct ExposureSpec {  // per-view gain and white balance, training views (and test views if asked)
+struct ExposureSpec {        // per-view gain and white balance, training views (and test views if asked)
   double stops = 0;          // gain 2^u, u uniform in [−stops, stops]
   double white_balance = 0;  // per-channel factor 1 + u, u uniform in [−wb, wb]
   bool test_views = false;
@@ -154,9 +154,9 @@ struct NoiseSpec {  // sensor noise: Gaussian, variance sigma² + shot·value, p
   friend bool operator==(const NoiseSpec&, const NoiseSpec&) = default;
 };
 
-struct PointsSpec {  // points3D.bin: surface points seen by the views, as SfM would give them
-  int count = 2000;                  // points sampled (those seen by < min_track views are dropped)
-  double position_noise_px = 0.3;    // 3D noise, σ chosen to reproject to this many pixels
+struct PointsSpec {                   // points3D.bin: surface points seen by the views, as SfM would give them
+  int count = 2000;                   // points sampled (those seen by < min_track views are dropped)
+  double position_noise_px = 0.3;     // 3D noise, σ chosen to reproject to this many pixels
   double observation_noise_px = 0.1;  // noise of the stored 2D observations [px]
   int min_track = 2;
   friend bool operator==(const PointsSpec&, const PointsSpec&) = default;
@@ -185,8 +185,8 @@ Description apply_description(const Description& base, const nlohmann::json& pat
 nlohmann::json description_to_json(const Description& description);
 
 struct GenerateOptions {
-  std::filesystem::path out;  // created if missing
-  bool overwrite = false;     // replace an earlier generator output in `out` (only its files)
+  std::filesystem::path out;                            // created if missing
+  bool overwrite = false;                               // replace an earlier generator output in `out` (only its files)
   std::function<void(const std::string&)> on_progress;  // one line per stage; empty: silent
 };
 

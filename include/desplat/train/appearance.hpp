@@ -65,8 +65,8 @@ std::vector<float> fourier_features(std::span<const float> means, int frequencie
 // (z, c̄, e) in that order.
 struct AppearanceModel {
   AppearanceSettings settings;
-  std::vector<float> mlp;               // all layers, flat
-  std::vector<float> image_embeddings;  // [views, image_dim]
+  std::vector<float> mlp;                             // all layers, flat
+  std::vector<float> image_embeddings;                // [views, image_dim]
   std::vector<float> mlp_m, mlp_v, embed_m, embed_v;  // Adam moments, same shapes
   int64_t adam_step = 0;
 
@@ -90,13 +90,13 @@ struct AppearanceModel {
 // One render's appearance pass: what forward keeps for backward, and the gradient buffers.
 // Scratch reused between steps; owned by the caller.
 struct AppearancePass {
-  std::vector<int32_t> rows;        // the visible Gaussians, in index order
-  std::vector<float> sh_rgb;        // [rows, 3] c before the change
-  std::vector<uint8_t> active;      // [rows, 3] 1 where γ ⊙ c + β > 0 (the clamp passed it)
-  std::vector<float> rgb_scale;     // [N, 3] ∂c̃/∂c: γ, or 0 where the clamp at 0 was active
+  std::vector<int32_t> rows;     // the visible Gaussians, in index order
+  std::vector<float> sh_rgb;     // [rows, 3] c before the change
+  std::vector<uint8_t> active;   // [rows, 3] 1 where γ ⊙ c + β > 0 (the clamp passed it)
+  std::vector<float> rgb_scale;  // [N, 3] ∂c̃/∂c: γ, or 0 where the clamp at 0 was active
   // backward's results
-  std::vector<float> d_mlp;         // same shape as AppearanceModel::mlp
-  std::vector<float> d_embedding;   // [image_dim] ∂L/∂e
+  std::vector<float> d_mlp;        // same shape as AppearanceModel::mlp
+  std::vector<float> d_embedding;  // [image_dim] ∂L/∂e
 
   // Replaces fw.rgb of every visible Gaussian by c̃ under `embedding` (e, [image_dim]).
   // `gaussians` must be the set fw was projected from (SH colours, features of feature_dim).

@@ -26,8 +26,8 @@ namespace desplat {
 
 struct BackgroundSettings {
   bool enabled = false;
-  int image_dim = 32;       // e_j
-  int hidden_width = 128;   // the appendix: 3 hidden layers of 128
+  int image_dim = 32;      // e_j
+  int hidden_width = 128;  // the appendix: 3 hidden layers of 128
   int hidden_layers = 3;
   int sh_degree = 4;
   int sh_degree_interval = 500;  // one band more every this many steps (half the static layer's)
@@ -94,8 +94,8 @@ struct BackgroundPass {
   std::vector<float> activations;   // every layer's output (hidden after ReLU), in order
   std::vector<float> coefficients;  // [25·3] the MLP's output
   int degree = 0;
-  std::vector<float> image;         // [P·3] bg(p)
-  std::vector<float> d_image;       // [P·3] ∂L/∂bg, filled by the caller (composite backward)
+  std::vector<float> image;               // [P·3] bg(p)
+  std::vector<float> d_image;             // [P·3] ∂L/∂bg, filled by the caller (composite backward)
   std::vector<float> d_mlp, d_embedding;  // backward's results
 
   // Fills `image` for `camera` (P = width·height) with bands 0 … degree.

@@ -17,14 +17,14 @@ struct DensifySettings {
   int reset_alpha_every = 30;  // opacity reset every reset_alpha_every·refine_every steps
   int stop_split_at = 15000;   // densify and reset only before this step; cull after
   int stop_screen_size_at = 4000;
-  float grad_threshold = 0.0008f;     // mean absgrad (× 0.5·max(W, H)) that counts as high
-  float size_threshold = 0.01f;       // max world scale: split above, duplicate at or below
-  float split_screen_size = 0.05f;    // also split large-on-screen Gaussians before stop_screen_size_at
+  float grad_threshold = 0.0008f;   // mean absgrad (× 0.5·max(W, H)) that counts as high
+  float size_threshold = 0.01f;     // max world scale: split above, duplicate at or below
+  float split_screen_size = 0.05f;  // also split large-on-screen Gaussians before stop_screen_size_at
   int split_samples = 2;
   float split_scale_factor = 1.6f;
-  float cull_alpha = 0.1f;            // cull opacity below this
-  float cull_scale = 0.5f;            // after the first reset: cull max world scale above this
-  float cull_screen_size = 0.15f;     // … or screen size above this before stop_screen_size_at
+  float cull_alpha = 0.1f;         // cull opacity below this
+  float cull_scale = 0.5f;         // after the first reset: cull max world scale above this
+  float cull_screen_size = 0.15f;  // … or screen size above this before stop_screen_size_at
   bool enabled = true;
   // Departures from the authors' code, each with its reason in docs/METHOD.md §7 (--preset
   // paper sets the authors' side of each):
@@ -47,9 +47,9 @@ constexpr int kGradientRatioBins = 5;
 
 struct RefineReport {
   int64_t split = 0, duplicated = 0, culled = 0;
-  int64_t high_gradient = 0;        // candidates for densification (mean gradient > threshold)
-  int64_t held_back = 0;            // candidates not densified because of a growth budget
-  int64_t on_camera_path = 0;       // culled for lying on the camera path (counted in culled too)
+  int64_t high_gradient = 0;   // candidates for densification (mean gradient > threshold)
+  int64_t held_back = 0;       // candidates not densified because of a growth budget
+  int64_t on_camera_path = 0;  // culled for lying on the camera path (counted in culled too)
   std::array<int64_t, kGradientRatioBins> gradient_ratio_bins{};
   bool opacity_reset = false;
   bool ran = false;

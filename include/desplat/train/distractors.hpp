@@ -8,14 +8,14 @@
 #include <span>
 
 #include "desplat/core/camera.hpp"
-#include "desplat/train/density.hpp"
 #include "desplat/core/gaussians.hpp"
+#include "desplat/train/density.hpp"
 #include "desplat/train/trainable.hpp"
 
 namespace desplat {
 
 struct DistractorSettings {
-  bool enabled = true;          // false: the static-only baseline (Splatfacto)
+  bool enabled = true;  // false: the static-only baseline (Splatfacto)
   // K per training view (§5): initial_count distractors for an image of reference_pixels
   // pixels (the paper's 504×378, RobustNeRF at 1/8), scaled with each view's pixel count
   // so the distractors cover the image as densely as the authors'. Their capacity is per
@@ -23,20 +23,24 @@ struct DistractorSettings {
   // static scene away (docs/METHOD.md §5). reference_pixels = 0: K = initial_count.
   int initial_count = 1000;
   int reference_pixels = 504 * 378;
-  float init_depth = 0.02f;     // ρ: the plane's depth in camera coordinates [normalized units]
-  float init_half_width = 0.01f;// x, y ~ U(−w, w) on that plane [normalized units]
+  float init_depth = 0.02f;       // ρ: the plane's depth in camera coordinates [normalized units]
+  float init_half_width = 0.01f;  // x, y ~ U(−w, w) on that plane [normalized units]
   float init_opacity = 0.1f;
   // Rates of §6; colors_dc is the RGB rate (colors_rest is unused in RGB mode). The
   // means' rate decays with the same schedule as the static means'.
-  LearningRates lr{.means = 1.6e-4f, .log_scales = 5e-2f, .quats = 1e-2f, .opacity_logits = 5e-2f, .colors_dc = 2.5e-2f,
+  LearningRates lr{.means = 1.6e-4f,
+                   .log_scales = 5e-2f,
+                   .quats = 1e-2f,
+                   .opacity_logits = 5e-2f,
+                   .colors_dc = 2.5e-2f,
                    .colors_rest = 0.0f};
   bool density_control = true;  // per-view split/duplicate/cull (§7); false: never refined
   // Refine every view each time all views were seen this many more times. 3, not the
   // authors' 10 (--preset paper): at 10 a buffer first grows after 10 visits, while the static
   // layer takes on the occluders' colours (docs/METHOD.md §7; docs/BENCHMARKS.md, the defaults).
   int refine_every_epochs = 3;
-  bool regularize = true;       // the two opacity regularizers of §4
-  float lambda_static = 0.01f;  // weight of mean(1 − A_s)
+  bool regularize = true;           // the two opacity regularizers of §4
+  float lambda_static = 0.01f;      // weight of mean(1 − A_s)
   float lambda_distractor = 0.01f;  // weight of mean(A_d)
   // Weight of the distractor mask's total variation (train/mask_coherence.hpp; ours): a
   // transient object is one connected area, also where it matches the scene behind it.
@@ -91,9 +95,9 @@ struct DistractorSettings {
   // unexplained (and > 1 % of the frame unexplained) is re-seeded at those pixels.
   bool reseed_starved_views = true;
   // A view whose composite leaves over 1 % of its pixels unexplained and that has room under
-  // its cap is seeded where neither layer explains the pixel (interiors of such regions only, see erode_mask): densification
-  // grows distractors only where some already are, so an occluder no distractor reaches
-  // would otherwise stay unexplained, and the static layer would fit it.
+  // its cap is seeded where neither layer explains the pixel (interiors of such regions only, see erode_mask):
+  // densification grows distractors only where some already are, so an occluder no distractor reaches would otherwise
+  // stay unexplained, and the static layer would fit it.
   bool seed_uncovered = true;
   // Seeding (the starved and uncovered rules) waits for step seed_after, the first
   // resolution switch: before it the static layer still misses detail everywhere, and a seed

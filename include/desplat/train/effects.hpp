@@ -57,19 +57,19 @@ struct ViewEvidence {
   std::string name;
   int samples = 0;
   std::array<float, 3> log2_gain{0, 0, 0};  // per channel, the median log₂(photo / point colour)
-  float open_top_share = 0;  // share of the frame in sky-like grid cells connected to the top edge
-  bool gain_judged = false;  // every channel had min_samples_per_view usable samples
+  float open_top_share = 0;                 // share of the frame in sky-like grid cells connected to the top edge
+  bool gain_judged = false;                 // every channel had min_samples_per_view usable samples
 };
 
 struct EffectsEvidence {
   std::vector<ViewEvidence> views;  // data.train order
   int judged_views = 0;             // views with at least min_samples_per_view samples
   double exposure_spread_stops = 0, white_balance_spread = 0;
-  bool appearance = false;          // the evidence calls for the appearance model
-  std::string reason;               // one sentence: why appearance is called for or not
-  double open_top_share = 0;        // median over judged views
-  bool background = false;          // the evidence calls for the background model
-  std::string background_reason;    // one sentence: why the background model is called for or not
+  bool appearance = false;        // the evidence calls for the appearance model
+  std::string reason;             // one sentence: why appearance is called for or not
+  double open_top_share = 0;      // median over judged views
+  bool background = false;        // the evidence calls for the background model
+  std::string background_reason;  // one sentence: why the background model is called for or not
 };
 
 // Throws std::invalid_argument when the track information does not match the points.

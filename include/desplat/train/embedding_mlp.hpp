@@ -23,7 +23,8 @@ std::vector<float> initial_embeddings(size_t count, std::mt19937_64& rng);
 
 // Throws std::logic_error naming `what` when a per-image model's arrays (mlp, image_embeddings
 // and their Adam moments mlp_m/mlp_v, embed_m/embed_v) disagree with its settings.
-template <class Model> void check_per_image_model(const Model& m, const std::string& what) {
+template <class Model>
+void check_per_image_model(const Model& m, const std::string& what) {
   if (m.mlp.size() != m.mlp_floats() || m.mlp_m.size() != m.mlp.size() || m.mlp_v.size() != m.mlp.size())
     throw std::logic_error(what + " MLP weights do not match its settings");
   const size_t n = m.image_embeddings.size();

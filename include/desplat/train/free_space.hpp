@@ -75,8 +75,8 @@ double distance_to_segment(const std::array<double, 3>& p, const std::array<doub
 // min over x in [a, b] of (x − p)ᵀ (Σ + r²·I)⁻¹ (x − p), with Σ = R·diag(exp(2·log_scale))·Rᵀ
 // and R the rotation of `quat` (w, x, y, z; normalized here). With scales → 0 it is
 // distance_to_segment(p, a, b)² / r².
-double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a,
-                         const std::array<double, 3>& b, const float* log_scale, const float* quat, double r);
+double tube_mahalanobis2(const std::array<double, 3>& p, const std::array<double, 3>& a, const std::array<double, 3>& b,
+                         const float* log_scale, const float* quat, double r);
 
 // Whether world point p lies in the blind gap of the segment from camera a to camera b: within
 // gap_fraction × |b − a| of the segment, in front of it ((p − midpoint) · (a's + b's viewing

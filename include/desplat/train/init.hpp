@@ -15,8 +15,7 @@ namespace desplat {
 // the point color ((rgb − 0.5) / Y₀), higher bands zero. `sh_degree` sets the stored
 // degree. Deterministic for a seed.
 GaussianSet init_gaussians_from_points(const std::vector<std::array<float, 3>>& xyz,
-                                       const std::vector<std::array<uint8_t, 3>>& rgb, int sh_degree,
-                                       uint64_t seed);
+                                       const std::vector<std::array<uint8_t, 3>>& rgb, int sh_degree, uint64_t seed);
 
 // Mean distance from each point to its k nearest other points (k-d tree, nanoflann).
 std::vector<float> mean_knn_distance(const std::vector<std::array<float, 3>>& xyz, int k);

@@ -28,9 +28,8 @@ struct PhotometricLoss {
 // SSIM sees both images multiplied by `keep` (so an ignored pixel reads 0 in both, whatever
 // the photo holds there) and averages over the window positions whose center is kept. With
 // nothing kept the loss is 0. An empty `keep` is the unmasked loss, bit for bit.
-PhotometricLoss photometric_loss(std::span<const float> render, std::span<const float> target, int width,
-                                 int height, float ssim_lambda, std::span<float> d_render,
-                                 std::span<const float> keep = {});
+PhotometricLoss photometric_loss(std::span<const float> render, std::span<const float> target, int width, int height,
+                                 float ssim_lambda, std::span<float> d_render, std::span<const float> keep = {});
 
 // Both metrics take the same optional `keep` mask: ignored pixels leave the comparison
 // (SSIM as in photometric_loss; PSNR over kept pixels; +inf when nothing is kept).

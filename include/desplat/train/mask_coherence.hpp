@@ -19,8 +19,8 @@ namespace desplat {
 // `d_alpha` [height·width] (sign(A(p) − A(q)) · λ / pixels to p, its negative to q; zero for
 // equal values) and returns the value. With `keep` ([height·width], 0 or 1, the user's mask)
 // a pair counts only when both pixels are kept, and the mean runs over kept pixels.
-double mask_total_variation(std::span<const float> alpha, int width, int height, float lambda,
-                            std::span<float> d_alpha, std::span<const float> keep = {});
+double mask_total_variation(std::span<const float> alpha, int width, int height, float lambda, std::span<float> d_alpha,
+                            std::span<const float> keep = {});
 
 // The occluder-colour prior (docs/METHOD.md §4, ours): a transient object is opaque and shows
 // what the photo shows. λ · mean over (kept) pixels of (1/3) Σ_c |C_d(p,c) − A_d(p)·I(p,c)|,

@@ -36,11 +36,11 @@ inline constexpr int kFeatureLayout = -1;  // GaussianSet::feature_dim
 
 struct ParamGroupInfo {
   ParamGroup id;
-  const char* name;                              // checkpoint arrays "<buffer>/<name>", messages
-  int width;                                     // floats per Gaussian, or kColorLayout / kFeatureLayout
-  std::vector<float> GaussianSet::*values;       // [N, width]
-  std::vector<float> RasterGradients::*grads;    // [N, width] ∂L/∂values
-  float LearningRates::*rate;                    // Colors: the DC (or RGB) rate
+  const char* name;                            // checkpoint arrays "<buffer>/<name>", messages
+  int width;                                   // floats per Gaussian, or kColorLayout / kFeatureLayout
+  std::vector<float> GaussianSet::*values;     // [N, width]
+  std::vector<float> RasterGradients::*grads;  // [N, width] ∂L/∂values
+  float LearningRates::*rate;                  // Colors: the DC (or RGB) rate
 };
 
 inline constexpr std::array<ParamGroupInfo, kParamGroups> kParamGroupTable{{
@@ -50,7 +50,8 @@ inline constexpr std::array<ParamGroupInfo, kParamGroups> kParamGroupTable{{
     {ParamGroup::Quats, "quats", 4, &GaussianSet::quats, &RasterGradients::quats, &LearningRates::quats},
     {ParamGroup::OpacityLogits, "opacity_logits", 1, &GaussianSet::opacity_logits, &RasterGradients::opacity_logits,
      &LearningRates::opacity_logits},
-    {ParamGroup::Colors, "colors", kColorLayout, &GaussianSet::colors, &RasterGradients::colors, &LearningRates::colors_dc},
+    {ParamGroup::Colors, "colors", kColorLayout, &GaussianSet::colors, &RasterGradients::colors,
+     &LearningRates::colors_dc},
     {ParamGroup::Features, "features", kFeatureLayout, &GaussianSet::features, &RasterGradients::features,
      &LearningRates::features},
 }};

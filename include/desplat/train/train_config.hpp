@@ -28,11 +28,11 @@ struct TrainConfig {
   // view per step.
   int batch = 1;
   int sh_degree = 3;
-  int sh_degree_interval = 1000;  // active SH degree +1 every this many steps
-  int num_downscales = 2;         // train at 2^num_downscales lower resolution first …
-  int resolution_schedule = 3000; // … halving the factor every this many steps
+  int sh_degree_interval = 1000;   // active SH degree +1 every this many steps
+  int num_downscales = 2;          // train at 2^num_downscales lower resolution first …
+  int resolution_schedule = 3000;  // … halving the factor every this many steps
   float ssim_lambda = 0.2f;
-  float means_lr_final = 1.6e-6f; // means' rate decays exponentially to this …
+  float means_lr_final = 1.6e-6f;        // means' rate decays exponentially to this …
   int64_t means_lr_decay_steps = 30000;  // … over this many steps, whatever `iterations` is (Splatfacto)
   LearningRates lr;
   DensifySettings densify;
@@ -51,8 +51,8 @@ struct TrainConfig {
   KernelIsa kernel_isa = KernelIsa::Auto;
   bool random_background = true;
   std::array<float, 3> eval_background{0.1490f, 0.1647f, 0.2157f};
-  int random_init_points = 50000;  // used when the scene has no points
-  float random_init_extent = 1.0f; // half-width of the cube for random initialization
+  int random_init_points = 50000;   // used when the scene has no points
+  float random_init_extent = 1.0f;  // half-width of the cube for random initialization
   uint64_t seed = 0;
   // 0: all cores. > 0 also becomes the calling thread's OpenMP default team size, so the
   // optimizer, loss and initialization honour it as the rasterizer does.

@@ -78,8 +78,8 @@ struct TrainableGaussians {
   std::array<std::vector<float>, kParamGroups> adam_m, adam_v;  // same shapes as params
   int64_t adam_step = 0;  // Adam's bias-correction count in views seen (one for all groups)
   // Densification statistics since the last refinement (docs/METHOD.md §7).
-  std::vector<float> absgrad_sum;     // [N] Σ over steps of the absgrad statistic
-  std::vector<int32_t> visible_count; // [N] steps in which the Gaussian was visible
+  std::vector<float> absgrad_sum;        // [N] Σ over steps of the absgrad statistic
+  std::vector<int32_t> visible_count;    // [N] steps in which the Gaussian was visible
   std::vector<float> max_screen_radius;  // [N] max over steps of radius / max(W, H)
   bool statistics_empty = true;          // no step recorded since the last reset
 

@@ -16,19 +16,19 @@
 #include <vector>
 
 #include "desplat/core/camera.hpp"
-#include "desplat/train/appearance.hpp"
-#include "desplat/train/background.hpp"
-#include "desplat/raster/composite.hpp"
-#include "desplat/train/density.hpp"
-#include "desplat/train/distractors.hpp"
-#include "desplat/train/transient_points.hpp"
 #include "desplat/core/image.hpp"
 #include "desplat/core/stopwatch.hpp"
-#include "desplat/raster/raster.hpp"
-#include "desplat/train/trainable.hpp"
 #include "desplat/core/world_frame.hpp"
+#include "desplat/raster/composite.hpp"
+#include "desplat/raster/raster.hpp"
+#include "desplat/train/appearance.hpp"
+#include "desplat/train/background.hpp"
+#include "desplat/train/density.hpp"
+#include "desplat/train/distractors.hpp"
 #include "desplat/train/train_config.hpp"
+#include "desplat/train/trainable.hpp"
 #include "desplat/train/training_data.hpp"
+#include "desplat/train/transient_points.hpp"
 
 namespace desplat {
 
@@ -46,7 +46,8 @@ struct StepTimings {
 // StepTimings (what metrics.json reports).
 class StepProfiler {
  public:
-  template <class Fn> void time(double StepTimings::*block, Fn&& fn) {
+  template <class Fn>
+  void time(double StepTimings::*block, Fn&& fn) {
     const Stopwatch watch;
     fn();
     timings.*block += watch.seconds();
@@ -92,9 +93,9 @@ struct LayerPass {
 
 // One view's distractor refinement, for the history in metrics.json.
 struct ViewRefinement {
-  int view = 0;              // index into data.train
+  int view = 0;  // index into data.train
   int64_t before = 0, after = 0, budget = kUnlimitedGrowth;
-  int64_t idle = 0;          // culled first by the idle cull (cull_idle_distractors)
+  int64_t idle = 0;  // culled first by the idle cull (cull_idle_distractors)
   // The buffer's summed alpha before growth (distractor_alpha_sum, full training resolution
   // [px]); computed only under distractors.max_alpha_sum, else 0.
   double alpha_sum = 0;
@@ -107,12 +108,12 @@ struct StepStats {
   int64_t step = 0;
   int views = 1;
   double loss = 0, psnr = 0;
-  size_t gaussians = 0;             // static
-  size_t view_distractors = 0;      // distractors of this step's views
+  size_t gaussians = 0;         // static
+  size_t view_distractors = 0;  // distractors of this step's views
   RefineReport refine;
-  RefineReport distractor_refine;   // summed over views when they were refined this step
+  RefineReport distractor_refine;                      // summed over views when they were refined this step
   std::vector<ViewRefinement> distractor_refinements;  // per view, when they were refined
-  int64_t reseeded = 0;             // distractors seeded in this step's views (starved or uncovered)
+  int64_t reseeded = 0;                                // distractors seeded in this step's views (starved or uncovered)
   int64_t nonfinite_pruned = 0;
   StepTimings timings;
   // Work of the static layer's render: Gaussian–pixel pairs whose α was evaluated, and
@@ -123,8 +124,8 @@ struct StepStats {
 
 // How a test view was scored.
 enum class EvalProtocol {
-  full_image,          // the render (plain colours) against the whole photo
-  appearance_halves,   // Photo Tourism: the view's embeddings fitted on the left half, scored on the right
+  full_image,         // the render (plain colours) against the whole photo
+  appearance_halves,  // Photo Tourism: the view's embeddings fitted on the left half, scored on the right
 };
 const char* to_string(EvalProtocol p);
 
@@ -260,10 +261,10 @@ class Trainer {
   std::vector<float> keep_;  // the latest view's mask in float (the losses weigh pixels with it)
   // One view of the step's batch, kept from its pass until the step's seeding.
   struct BatchView {
-    int view = 0;         // index into data.train
-    int64_t index = 0;    // views seen before it (the schedules' step)
-    int factor = 1;       // its resolution factor
-    Camera camera;        // at that factor
+    int view = 0;                    // index into data.train
+    int64_t index = 0;               // views seen before it (the schedules' step)
+    int factor = 1;                  // its resolution factor
+    Camera camera;                   // at that factor
     std::vector<uint8_t> uncovered;  // its pixels neither layer explains [H·W of camera]
   };
   // Scratch reused every step.

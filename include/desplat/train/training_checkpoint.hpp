@@ -1,6 +1,6 @@
 // Trainer state ⇄ Checkpoint (checkpoint.hpp): every parameter, Adam moment and
-// densification statistic (static and every view's distractors), the step, the view permutation and the RNG state, so that a
-// restored trainer continues bit-exactly (for a fixed thread count).
+// densification statistic (static and every view's distractors), the step, the view permutation and the RNG state, so
+// that a restored trainer continues bit-exactly (for a fixed thread count).
 #pragma once
 
 #include "desplat/io/checkpoint.hpp"

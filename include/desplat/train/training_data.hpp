@@ -15,8 +15,8 @@ namespace desplat {
 
 struct TrainView {
   std::string name;
-  Camera camera;      // undistorted pinhole, normalized frame, full training resolution
-  ByteImage image;    // [H, W, 3] matching the camera, 8 bits per channel (core/image.hpp)
+  Camera camera;    // undistorted pinhole, normalized frame, full training resolution
+  ByteImage image;  // [H, W, 3] matching the camera, 8 bits per channel (core/image.hpp)
   // Optional [H·W], the user's mask (docs/METHOD.md §4, masks): 1 = use the pixel, 0 = ignore
   // it; empty = use every pixel. One byte per pixel, like the photo's channels: a float mask
   // would take more memory than the photo. An ignored pixel leaves the loss, SSIM, the
@@ -27,7 +27,7 @@ struct TrainView {
 
 struct TrainingData {
   std::vector<TrainView> train, test;
-  std::vector<std::array<float, 3>> points;     // normalized frame
+  std::vector<std::array<float, 3>> points;  // normalized frame
   std::vector<std::array<uint8_t, 3>> colors;
   // Optional, [points] or both empty: how many images each point's track holds, and which
   // training views (indices into `train`) observe it (transient_points.hpp).

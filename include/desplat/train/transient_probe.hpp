@@ -33,9 +33,10 @@ struct TransientRules {
   // that see the same surface point (their depth there agrees, depth_tolerance) is at most half
   // the tolerance: they explain it.
   float neighbour_fraction = 0.5f;
-  int neighbours = 6;              // the nearest camera centres …
-  float max_axis_angle_deg = 60;   // … among views whose optical axis is this close
-  float depth_tolerance = 0.1f;    // the same surface there: its depth within this fraction of the neighbour's rendered depth
+  int neighbours = 6;             // the nearest camera centres …
+  float max_axis_angle_deg = 60;  // … among views whose optical axis is this close
+  float depth_tolerance =
+      0.1f;  // the same surface there: its depth within this fraction of the neighbour's rendered depth
   // A connected area (4-neighbours) of view-specific pixels counts when it covers at least this
   // share of the frame: an object, not scattered misfit pixels.
   float min_area = 0.005f;
@@ -51,15 +52,16 @@ struct TransientRules {
 struct ProbeView {
   Camera camera;
   std::vector<float> error;  // [H·W] mean |render − photo| over RGB; < 0 where not judged (a user mask)
-  std::vector<float> depth;  // [H·W] the render's depth along the optical axis [world units, normalized frame]; 0: no surface
+  std::vector<float>
+      depth;  // [H·W] the render's depth along the optical axis [world units, normalized frame]; 0: no surface
 };
 
 struct TransientEvidence {
   std::vector<float> view_share;  // per view: the share of its frame in counted areas
   int views_with_transients = 0;
-  int judged_views = 0;          // views with at least 2 neighbours
+  int judged_views = 0;  // views with at least 2 neighbours
   bool transients = false;
-  std::string reason;            // one sentence
+  std::string reason;  // one sentence
 };
 
 // Judges probe views (all the same scene's training views at one resolution). Throws

@@ -14,7 +14,7 @@ namespace desplat {
 
 struct ViewResidual {
   int64_t pixels = 0;
-  int64_t static_unexplained = 0;     // mean |static layer over bg − target| over RGB ≥ tolerance
+  int64_t static_unexplained = 0;  // mean |static layer over bg − target| over RGB ≥ tolerance
   // Of those, the ones inside a connected area (counted only with
   // ResidualPenalties::count_in_areas): the static misses that survive a 3×3 opening
   // (erosion, then dilation, of the miss mask). Thin or isolated misses (edges, fine texture
@@ -23,9 +23,7 @@ struct ViewResidual {
   int64_t composite_unexplained = 0;  // mean |composite − target| over RGB ≥ tolerance
   double penalty = 0;                 // λ_e · mean(A_d · explained) + λ_o · mean((1 − A_d) · owned)
   double static_fraction() const { return pixels ? double(static_unexplained) / double(pixels) : 0.0; }
-  double static_area_fraction() const {
-    return pixels ? double(static_unexplained_in_areas) / double(pixels) : 0.0;
-  }
+  double static_area_fraction() const { return pixels ? double(static_unexplained_in_areas) / double(pixels) : 0.0; }
   double composite_fraction() const { return pixels ? double(composite_unexplained) / double(pixels) : 0.0; }
 };
 
