@@ -14,6 +14,6 @@ $SUDO apt-get install -y --no-install-recommends \
   libopencv-dev libopenimageio-dev openimageio-tools \
   libgtest-dev libgmock-dev libbenchmark-dev \
   nlohmann-json3-dev libcli11-dev libnanoflann-dev libsqlite3-dev \
-  colmap clang libclang-rt-14-dev libomp-dev \
+  colmap clang clang-format libclang-rt-14-dev libomp-dev \
   gnuplot-nox chromium python3-pil \
   openmpi-bin libopenmpi-dev
