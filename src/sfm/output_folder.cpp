@@ -76,8 +76,12 @@ void prepare_output(const SfmOptions& o, const Layout& l, const std::vector<fs::
   if (is_inside(o.out, o.images))
     fail(SfmErrorKind::OutputExists, "--out " + in_quotes(o.out) + " is inside the images folder " +
                                          in_quotes(o.images) + "; choose an --out outside it");
+  // A COLMAP project's own images folder (--images is <out>/images) is used in place; any
+  // other overlap of --out with the photos is refused.
+  std::error_code same_ec;
+  const bool in_place = fs::equivalent(o.images, l.images, same_ec);
   try {
-    check_output_folder("--out", o.out, {{"--images", o.images}});
+    check_output_folder("--out", o.out, {{"--images", in_place ? fs::path() : o.images}});
   } catch (const std::invalid_argument& e) {
     fail(SfmErrorKind::OutputExists, e.what());
   }
