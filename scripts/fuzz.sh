@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Fuzzes the COLMAP binary readers, the 3DGS PLY reader, the JSON readers (--config, scene
-# descriptions, bench grids) and the checkpoint restore with libFuzzer. CI runs it for 60 s
-# per harness as the ctest test fuzz_harnesses; run it longer by hand to search deeper. Builds a separate clang + ASan/UBSan tree in build/fuzz, seeds the
+# descriptions, bench grids) and the checkpoint restore with libFuzzer. CI runs it for 30 s
+# per harness as the ctest test fuzz_harnesses; run it longer by hand to search deeper.
+# Builds a separate clang + ASan/UBSan tree in build/fuzz, seeds the
 # corpora with files written by the project (and the fox model's .bin files when
 # ../shared/data/fox/sparse/0 exists), then runs each harness for a bounded time, one at a
 # time (the machines have 2 cores).
