@@ -3,6 +3,10 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <memory>
+#include <new>
+
+#include "desplat/comm/communicator.hpp"
 
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/train/presets.hpp"
@@ -12,6 +16,11 @@
 #include "stop_signal.hpp"
 
 int main(int argc, char** argv) {
+  // Under mpirun or srun one rank of a data-parallel job (docs/METHOD.md §6, ranks), else one
+  // process. Opened first: MPI may take its own arguments out of argv.
+  const std::unique_ptr<desplat::Communicator> comm = desplat::open_communicator(&argc, &argv);
+  // Only rank 0 prints progress; every rank's warnings and errors go to stderr.
+  if (comm->rank() != 0 && !std::freopen("/dev/null", "w", stdout)) return 1;
   CLI::App app{
       "Train a 3D Gaussian Splatting model on the CPU.\n"
       "Input: --data DIR with images/ and sparse/0/ (a COLMAP model), or --images DIR with photos only\n"
@@ -94,8 +103,14 @@ int main(int argc, char** argv) {
   const std::atomic<bool>& stop = desplat_apps::stop_on_signals();
   try {
     o.split.rule = desplat::split_rule_from_name(split_rule);
-    return desplat::run_training(o, stop);
+    return desplat::run_training(o, stop, comm.get());
+  } catch (const std::bad_alloc&) {
+    // A rank out of memory ends the whole job (the others would wait for it forever).
+    if (comm->size() > 1) comm->abort("desplat_train: error: out of memory; use more ranks or a larger --downscale");
+    std::fprintf(stderr, "desplat_train: error: out of memory; use a larger --downscale\n");
+    return 1;
   } catch (const std::exception& e) {
+    if (comm->size() > 1) comm->abort(std::string("desplat_train: error: ") + e.what());
     std::fprintf(stderr, "desplat_train: error: %s\n", e.what());
     return 1;
   }

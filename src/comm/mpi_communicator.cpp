@@ -9,6 +9,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "desplat/core/stopwatch.hpp"
+
 namespace desplat {
 namespace {
 
@@ -47,18 +49,28 @@ class Mpi final : public Communicator {
   ~Mpi() override { MPI_Finalize(); }
   int rank() const override { return rank_; }
   int size() const override { return size_; }
-  void sum(std::span<float> v) override { ordered_sum(v); }
-  void sum(std::span<double> v) override { ordered_sum(v); }
-  void sum(std::span<int64_t> v) override { ordered_sum(v); }
+  void sum(std::span<float> v) override {
+    metered(v.size_bytes(), [&] { ordered_sum(v); });
+  }
+  void sum(std::span<double> v) override {
+    metered(v.size_bytes(), [&] { ordered_sum(v); });
+  }
+  void sum(std::span<int64_t> v) override {
+    metered(v.size_bytes(), [&] { ordered_sum(v); });
+  }
   void broadcast(std::span<std::byte> bytes, int root) override {
     if (root < 0 || root >= size_)
       abort("broadcast from rank " + std::to_string(root) + " of " + std::to_string(size_));
-    for (size_t at = 0; at < bytes.size(); at += size_t(INT_MAX)) {
-      const int n = int(std::min(bytes.size() - at, size_t(INT_MAX)));
-      check(MPI_Bcast(bytes.data() + at, n, MPI_BYTE, root, MPI_COMM_WORLD), "MPI_Bcast");
-    }
+    metered(bytes.size(), [&] {
+      for (size_t at = 0; at < bytes.size(); at += size_t(INT_MAX)) {
+        const int n = int(std::min(bytes.size() - at, size_t(INT_MAX)));
+        check(MPI_Bcast(bytes.data() + at, n, MPI_BYTE, root, MPI_COMM_WORLD), "MPI_Bcast");
+      }
+    });
   }
-  void barrier() override { check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier"); }
+  void barrier() override {
+    metered(0, [&] { check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier"); });
+  }
   [[noreturn]] void abort(const std::string& message) override {
     std::fprintf(stderr, "rank %d: %s\n", rank_, message.c_str());
     std::fflush(stderr);
@@ -70,6 +82,15 @@ class Mpi final : public Communicator {
  private:
   int rank_ = 0, size_ = 1;
   std::vector<std::byte> gathered_;  // rank 0: one chunk from every rank
+
+  template <class Fn>
+  void metered(size_t bytes, Fn&& fn) {
+    const Stopwatch watch;
+    fn();
+    totals_.seconds += watch.seconds();
+    totals_.bytes += int64_t(bytes);
+    ++totals_.calls;
+  }
 
   void check(int code, const char* call) {
     if (code == MPI_SUCCESS) return;

@@ -24,6 +24,12 @@ bool started_by_mpi_launcher() {
 }
 }  // namespace
 
+void broadcast_string(Communicator& comm, std::string& text, int root) {
+  std::vector<char> bytes(text.begin(), text.end());
+  broadcast_vector(comm, bytes, root);
+  text.assign(bytes.begin(), bytes.end());
+}
+
 std::unique_ptr<Communicator> open_communicator(int* argc, char*** argv) {
 #if DESPLAT_WITH_MPI
   if (started_by_mpi_launcher()) return mpi_communicator(argc, argv);

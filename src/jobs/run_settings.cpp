@@ -99,10 +99,21 @@ TrainConfig settings_to_resume(const TrainConfig& trained_with, const TrainConfi
 // configured, on by default) kept only where a short static-only probe finds transients.
 // nullopt: interrupted during the probe.
 std::optional<json> choose_effects_automatically(TrainConfig& config, const TrainingData& data,
-                                                 const std::atomic<bool>& stop_requested) {
-  const EffectsEvidence ev = examine_effects(data);
+                                                 const std::atomic<bool>& stop_requested, Communicator* comm) {
+  const EffectsEvidence ev = examine_effects(data, {}, comm);
   std::vector<std::string> why;
   Effects chosen = choose_effects(Effects::of(config), ev, why);
+  // The per-image models train in one process only (Trainer; docs/METHOD.md §6, ranks): a
+  // job of several ranks leaves them out and says so.
+  if (comm && comm->size() > 1 && (chosen.appearance || chosen.background)) {
+    for (const char* model : {"appearance", "background"})
+      if (std::string(model) == "appearance" ? chosen.appearance : chosen.background)
+        why.push_back(std::string(model) + " left off after all: this job has " + std::to_string(comm->size()) +
+                      " ranks, and the " + model +
+                      " model trains in one process only (run without mpirun/srun "
+                      "to model it)");
+    chosen.appearance = chosen.background = false;
+  }
   json transients = nullptr;
   if (chosen.distractors) {
     // The probe runs with the appearance and background just chosen.
@@ -114,7 +125,7 @@ std::optional<json> choose_effects_automatically(TrainConfig& config, const Trai
     std::printf("--effects auto: probing for transients (%d static-only steps at 1/%d resolution)\n", rules.probe_steps,
                 data.train.empty() ? 1 : probe_factor(data.train[0].camera.width, data.train[0].camera.height, rules));
     const Stopwatch probe_clock;
-    const std::optional<TransientEvidence> probed = probe_transients(data, probe_config, rules, &stop_requested);
+    const std::optional<TransientEvidence> probed = probe_transients(data, probe_config, rules, &stop_requested, comm);
     if (!probed) return std::nullopt;
     const TransientEvidence& te = *probed;
     const double probe_seconds = probe_clock.seconds();
@@ -221,7 +232,7 @@ RequestedSettings request_settings(const TrainingRunOptions& opt) {
 std::optional<ResolvedSettings> resolve_settings(const RequestedSettings& requested, const TrainingRunOptions& opt,
                                                  const TrainingData& data, const ModelFolder::Config* resumed,
                                                  const std::string& record_name,
-                                                 const std::atomic<bool>& stop_requested) {
+                                                 const std::atomic<bool>& stop_requested, Communicator* comm) {
   ResolvedSettings out;
   out.config = requested.config;
   const json resumed_run = resumed ? resumed->run : json::object();
@@ -234,7 +245,7 @@ std::optional<ResolvedSettings> resolve_settings(const RequestedSettings& reques
     out.effects_evidence = resumed_run.value("effects_evidence", json(nullptr));
     std::printf("--effects auto: %s, as this model was trained\n", Effects::of(out.config).to_string().c_str());
   } else if (requested.auto_effects) {
-    const std::optional<json> evidence = choose_effects_automatically(out.config, data, stop_requested);
+    const std::optional<json> evidence = choose_effects_automatically(out.config, data, stop_requested, comm);
     if (!evidence) return std::nullopt;
     out.effects_evidence = *evidence;
   }

@@ -21,31 +21,43 @@ namespace {
 
 }  // namespace
 
-TrainingData load_training_data(const Scene& scene) {
+bool load_view_photo(const Scene& scene, size_t i, ByteImage& photo, std::vector<uint8_t>& keep) {
+  // Held in 8 bits (a quarter of float's memory): exact for 8-bit photos and the loader's
+  // 8-bit cache; deeper files are rounded, and the return value says so (docs/METHOD.md §6).
+  const FloatImage full = load_view_image(scene, i);
+  photo = to_bytes(full);
+  bool rounded = false;
+  for (size_t k = 0; k < full.pixels.size() && !rounded; ++k)
+    rounded = byte_to_float(photo.pixels[k]) != full.pixels[k];
+  keep.clear();
+  if (!scene.views[i].user_mask_path.empty()) {
+    const std::vector<float> mask = load_view_keep_mask(scene, i);  // exactly 0 or 1
+    keep.assign(mask.begin(), mask.end());
+    // What the mask hides is never read: zero it, so no rule can use it by accident.
+    for (size_t p = 0; p < keep.size(); ++p)
+      if (keep[p] == 0) photo.pixels[3 * p] = photo.pixels[3 * p + 1] = photo.pixels[3 * p + 2] = 0;
+  }
+  return rounded;
+}
+
+TrainingData load_training_data(const Scene& scene, int rank, int ranks) {
   TrainingData data;
   data.points = scene.points_xyz;
   data.colors = scene.points_rgb;
   data.normalization = scene.normalization;
   std::vector<TrainView> views(scene.views.size());
   std::vector<uint8_t> rounded(scene.views.size(), 0);  // the photo had values 8 bits do not hold
+  // Each view's index among the training or the test views decides its rank (rank_of_view).
+  std::vector<uint8_t> held(scene.views.size(), 1);
+  for (size_t i = 0, train = 0, test = 0; i < scene.views.size(); ++i)
+    held[i] = rank_of_view(scene.views[i].is_test ? test++ : train++, ranks) == rank;
   std::string error;
 #pragma omp parallel for schedule(dynamic)
   for (size_t i = 0; i < scene.views.size(); ++i) {
+    views[i] = {scene.views[i].name, scene.views[i].camera, {}, {}};
+    if (!held[i]) continue;  // another rank's
     try {
-      // Held in 8 bits (a quarter of float's memory): exact for 8-bit photos and the loader's
-      // 8-bit cache; deeper files are rounded, and said so below (docs/METHOD.md §6).
-      const FloatImage photo = load_view_image(scene, i);
-      views[i] = {scene.views[i].name, scene.views[i].camera, to_bytes(photo), {}};
-      for (size_t k = 0; k < photo.pixels.size() && !rounded[i]; ++k)
-        rounded[i] = byte_to_float(views[i].image.pixels[k]) != photo.pixels[k];
-      if (!scene.views[i].user_mask_path.empty()) {
-        const std::vector<float> keep = load_view_keep_mask(scene, i);  // exactly 0 or 1
-        views[i].keep.assign(keep.begin(), keep.end());
-        // What the mask hides is never read: zero it, so no rule can use it by accident.
-        for (size_t p = 0; p < views[i].keep.size(); ++p)
-          if (views[i].keep[p] == 0)
-            views[i].image.pixels[3 * p] = views[i].image.pixels[3 * p + 1] = views[i].image.pixels[3 * p + 2] = 0;
-      }
+      rounded[i] = load_view_photo(scene, i, views[i].image, views[i].keep);
     } catch (const std::exception& e) {
 #pragma omp critical
       error = e.what();
@@ -77,7 +89,7 @@ TrainingData load_training_data(const Scene& scene) {
   return data;
 }
 
-RunInputs load_run_inputs(const TrainingRunOptions& opt) {
+RunInputs load_run_inputs(const TrainingRunOptions& opt, int rank, int ranks) {
   RunInputs in;
   const ModelFolder model(opt.out_dir);
   if (opt.resume) {
@@ -107,7 +119,7 @@ RunInputs load_run_inputs(const TrainingRunOptions& opt) {
       throw std::invalid_argument("--resume: the scene is not the one " + opt.out_dir.string() +
                                   " was trained on: " + changed);
   }
-  in.data = load_training_data(in.scene);
+  in.data = load_training_data(in.scene, rank, ranks);
   return in;
 }
 

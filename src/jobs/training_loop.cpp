@@ -105,8 +105,11 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
   const int64_t curve_every = std::max<int64_t>(1, config.iterations / 200);
   double curve_loss = 0, curve_psnr = 0;
   int curve_steps = 0;
+  int64_t interval_bytes = 0;  // this rank's collectives since the last curve point
+  double interval_comm_seconds = 0;
   while (trainer.current_step() < config.iterations) {
-    if (stop_requested.load()) {
+    // The ranks stop together, at the same step, when any of them was asked to.
+    if (any_rank(trainer.communicator(), stop_requested.load())) {
       save();
       progress.newline_if_tty();
       std::printf("interrupted at step %lld; checkpoint written to %s (continue with --resume)\n",
@@ -129,10 +132,13 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
       r.ns_forward_backward.push_back(1e9 * (s.timings.forward + s.timings.backward) / n_pairs);
       r.visible_share.push_back(double(s.static_visible) / s.views / double(std::max<size_t>(1, s.gaussians)));
     }
+    r.comm_bytes.push_back(double(s.comm_bytes)), r.comm_seconds.push_back(s.comm_seconds);
+    r.step_seconds.push_back(s.timings.total());
     const double elapsed = run_clock.seconds();
     progress.update(s, elapsed, trainer.current_step() - first);
     const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
+    interval_bytes += s.comm_bytes, interval_comm_seconds += s.comm_seconds;
     if (reaches_multiple(before, done, curve_every) || done == config.iterations) {
       r.history.push_back({{"kind", "training"},
                            {"step", done},
@@ -140,8 +146,11 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
                            {"loss", curve_loss / curve_steps},
                            {"psnr", curve_psnr / curve_steps},
                            {"gaussians", s.gaussians},
-                           {"distractor_gaussians", trainer.distractor_count()}});
+                           {"distractor_gaussians", trainer.distractor_count()},
+                           {"comm_bytes", interval_bytes},
+                           {"comm_seconds", interval_comm_seconds}});
       curve_loss = curve_psnr = 0, curve_steps = 0;
+      interval_bytes = 0, interval_comm_seconds = 0;
     }
     if (opt.eval_every > 0 && reaches_multiple(before, done, opt.eval_every) && done < config.iterations &&
         !data.test.empty()) {
@@ -153,7 +162,12 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
                     {"mean_ssim", m["mean_ssim"]},
                     {"gaussians", trainer.gaussians().size()},
                     {"distractor_gaussians", trainer.distractor_count()}};
-      if (has_masks) point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
+      if (has_masks) {
+        // Every view's distractors are needed, on rank 0: gathered for the score, then released.
+        trainer.gather_to_root();
+        point["mean_mask_iou"] = evaluate_distractor_masks(trainer, scene).mean_iou;
+        trainer.keep_own_share();
+      }
       r.history.push_back(point);
     }
     if (opt.checkpoint_every > 0 && reaches_multiple(before, done, opt.checkpoint_every) && done < config.iterations)

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <numeric>
 
 #include "desplat/core/statistics.hpp"
 #include "desplat/eval/mask_metrics.hpp"
@@ -94,8 +95,24 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
                             const ResolvedSettings& settings, const TrainingRecord& record) {
   const TrainConfig& config = trainer.config();
   const TrainingData& data = trainer.data();
-  // Final evaluation and outputs.
+  // Final evaluation (every rank scores its own test views), then the outputs, by rank 0.
   const std::vector<ViewMetrics> final_metrics = trainer.evaluate(data.test);
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  std::vector<double> peak_mb(size_t(trainer.ranks()), 0.0);  // each rank's peak resident memory
+  peak_mb[size_t(trainer.rank())] = double(usage.ru_maxrss) / 1024.0;
+  if (Communicator* comm = trainer.communicator()) comm->sum(std::span(peak_mb));
+  if (trainer.rank() != 0) return;
+  // Rank 0's own views are in memory; another rank's photo is read again, one at a time.
+  auto photo_of = [&](const TrainView& v) {
+    if (!v.image.pixels.empty()) return to_float(v.image);
+    const auto at = std::find_if(inputs.scene.views.begin(), inputs.scene.views.end(),
+                                 [&](const SceneView& sv) { return sv.name == v.name; });
+    ByteImage photo;
+    std::vector<uint8_t> keep;
+    load_view_photo(inputs.scene, size_t(at - inputs.scene.views.begin()), photo, keep);
+    return to_float(photo);
+  };
   for (const TrainView& v : data.test) {
     fs::path name = fs::path(v.name).replace_extension(".png");
     // A model with per-image appearance or background shows the test view in the look fitted
@@ -104,17 +121,15 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
                                      [&](const ViewMetrics& m) { return m.name == v.name; });
     const FloatImage render =
         trainer.render(v.camera, config.eval_background, scored != final_metrics.end() ? scored->look : ViewLook{});
-    const FloatImage photo = to_float(v.image);
+    const FloatImage photo = photo_of(v);
     write_image(opt.out_dir / "renders" / "test" / name, side_by_side({&photo, &render}));
   }
   // The paper's Fig. 2 for every training view: truth | static | distractor | composite | mask.
   if (config.distractors.enabled)
     for (size_t v = 0; v < data.train.size(); ++v)
       write_image(opt.out_dir / "renders" / "train" / fs::path(data.train[v].name).replace_extension(".png"),
-                  layers_figure_row(to_float(data.train[v].image), trainer.render_layers(v, config.eval_background)));
+                  layers_figure_row(photo_of(data.train[v]), trainer.render_layers(v, config.eval_background)));
   write_gaussian_ply(opt.out_dir / "point_cloud.ply", trainer.gaussians().params, data.normalization);
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
   json metrics = metrics_json(final_metrics);
   metrics["step"] = trainer.current_step();
   metrics["gaussians"] = trainer.gaussians().size();
@@ -139,7 +154,18 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
   if (!inputs.sfm_summary.is_null()) metrics["sfm"] = inputs.sfm_summary;
   metrics["history"] = record.history;
   metrics["wall_seconds_this_run"] = record.wall_seconds;
-  metrics["peak_memory_mb"] = double(usage.ru_maxrss) / 1024.0;
+  metrics["peak_memory_mb"] = peak_mb[0];
+  metrics["ranks"] = {{"count", trainer.ranks()},
+                      {"communicator", trainer.communicator() ? trainer.communicator()->kind() : "single process"},
+                      {"peak_memory_mb", peak_mb}};
+  // Rank 0's collectives: payload bytes and seconds per step, and their share of the step time.
+  const double comm_total = std::accumulate(record.comm_seconds.begin(), record.comm_seconds.end(), 0.0),
+               step_total = std::accumulate(record.step_seconds.begin(), record.step_seconds.end(), 0.0);
+  metrics["communication"] = {{"median_bytes_per_step", median(record.comm_bytes)},
+                              {"median_seconds_per_step", median(record.comm_seconds)},
+                              {"total_bytes", std::accumulate(record.comm_bytes.begin(), record.comm_bytes.end(), 0.0)},
+                              {"total_seconds", comm_total},
+                              {"share_of_step_time", step_total > 0 ? comm_total / step_total : 0.0}};
   metrics["median_step_seconds_full_resolution"] = {
       {"forward", median(record.forward)},
       {"backward", median(record.backward)},

@@ -114,35 +114,59 @@ void describe_trainer(const Trainer& trainer) {
 
 }  // namespace
 
-int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested) {
+int run_training(const TrainingRunOptions& opt, const std::atomic<bool>& stop_requested, Communicator* comm) {
+  const int rank = comm ? comm->rank() : 0, ranks = comm ? comm->size() : 1;
+  if (ranks > 1 && !opt.images_dir.empty())
+    throw std::invalid_argument(
+        "--images runs COLMAP, which a job of several ranks does not do: place the photos first with "
+        "desplat_sfm --images " +
+        opt.images_dir.string() +
+        " --out SCENE (or desplat_train --images in one process), then train with mpirun "
+        "or srun and --data SCENE");
   check_output_folder("--out", opt.out_dir,
                       {{"--data", opt.data_dir}, {"--images", opt.images_dir}, {"--masks", opt.masks_dir}});
   refuse_earlier_outputs(opt);
   const RequestedSettings requested = request_settings(opt);
-  const RunInputs inputs = load_run_inputs(opt);
+  const RunInputs inputs = load_run_inputs(opt, rank, ranks);
   const ModelFolder model(opt.out_dir);
   const std::optional<ResolvedSettings> settings =
       resolve_settings(requested, opt, inputs.data, inputs.resumed ? &*inputs.resumed : nullptr,
-                       model.config_path().string(), stop_requested);
+                       model.config_path().string(), stop_requested, comm);
   if (!settings) {
     std::printf("interrupted during the transient probe, before training started: no checkpoint was written\n");
     return 130;
   }
   describe_run(settings->config, inputs);
-  Trainer trainer(inputs.data, settings->config);  // its own checks (image sizes) come first too
-  prepare_output_folder(opt);
-  // The trainer's configuration is the effective one (e.g. a static-only model keeps every
-  // sparse point): that is what config.json records.
-  model.write_config({trainer.config(), inputs.recipe, settings->run, {}});
+  if (ranks > 1)
+    std::printf("%d ranks (%s): each holds the photos of about 1/%d of the views; global batch %d\n", ranks,
+                comm->kind(), ranks, settings->config.batch);
+  Trainer trainer(inputs.data, settings->config, comm);  // its own checks (image sizes) come first too
+  // Rank 0 alone writes the output folder; the others wait until it is in place.
+  if (rank == 0) {
+    prepare_output_folder(opt);
+    // The trainer's configuration is the effective one (e.g. a static-only model keeps every
+    // sparse point): that is what config.json records.
+    model.write_config({trainer.config(), inputs.recipe, settings->run, {}});
+  }
+  if (comm) comm->barrier();
   describe_trainer(trainer);
-  auto save = [&] { model.write_checkpoint(trainer, {{"run", settings->run}}); };
+  // One checkpoint for the job: every view's state gathered onto rank 0, which writes it.
+  auto write_checkpoint = [&] {
+    trainer.gather_to_root();
+    if (rank == 0) model.write_checkpoint(trainer, {{"run", settings->run}});
+  };
+  auto save = [&] {
+    write_checkpoint();
+    trainer.keep_own_share();
+  };
   if (opt.resume) {
     restore_training_checkpoint(trainer, model.read_checkpoint());
+    trainer.keep_own_share();
     std::printf("resumed from %s at step %lld\n", model.checkpoint_path().c_str(), (long long)trainer.current_step());
   }
   const TrainingRecord record = train_to_end(trainer, opt, inputs.scene, save, stop_requested);
   if (record.interrupted) return 130;
-  save();
+  write_checkpoint();  // rank 0 keeps every view's state for the outputs
   write_training_outputs(trainer, opt, inputs, *settings, record);
   return 0;
 }

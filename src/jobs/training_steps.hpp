@@ -33,7 +33,8 @@ struct RunInputs {
 // Runs SfM on --images, loads the scene (on --resume at the downscale config.json records
 // unless --downscale is given), and on --resume reads config.json and checks the scene is
 // the one the model was trained on. Throws std::invalid_argument / SceneError.
-RunInputs load_run_inputs(const TrainingRunOptions& options);
+// As rank `rank` of `ranks`: only this rank's photos (load_training_data).
+RunInputs load_run_inputs(const TrainingRunOptions& options, int rank = 0, int ranks = 1);
 
 // What the training loop recorded: metrics.json's history and the per-step timings at full
 // resolution (each vector one entry per such step).
@@ -41,6 +42,8 @@ struct TrainingRecord {
   nlohmann::json history = nlohmann::json::array();
   std::vector<double> forward, backward, loss, optimizer, distractor, appearance, background, total, distractor_share;
   std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
+  // Every step: this rank's collectives (bytes, seconds; zero in one process) and the step's time.
+  std::vector<double> comm_bytes, comm_seconds, step_seconds;
   double wall_seconds = 0;   // this process's training, without the final evaluation
   bool interrupted = false;  // stopped by stop_requested (checkpoint written)
 };

@@ -112,42 +112,53 @@ std::vector<std::vector<TrackSample>> track_samples(const TrainingData& data) {
 
 }  // namespace
 
-EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r) {
+EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r, Communicator* comm) {
   EffectsEvidence ev;
-  // Per view and channel, log₂(photo / point colour) of every sample whose colours are neither
-  // near black nor near saturation (where a ratio says nothing about exposure).
+  const int rank = comm ? comm->rank() : 0, ranks = comm ? comm->size() : 1;
+  // Per view, on the rank that holds its photo: per channel, log₂(photo / point colour) of
+  // every sample whose colours are neither near black nor near saturation (where a ratio says
+  // nothing about exposure), and the open sky above the scene.
   const std::vector<std::vector<TrackSample>> track = track_samples(data);
-  std::vector<std::array<std::vector<double>, 3>> ratios(data.train.size());
-  std::vector<int> samples(data.train.size(), 0);
-  for (size_t v = 0; v < data.train.size(); ++v)
-    for (const TrackSample& s : track[v]) {
-      ++samples[v];
+  constexpr size_t kFields = 5;  // log2_gain[3], open_top_share, gain_judged
+  std::vector<double> judged_values(kFields * data.train.size(), 0.0);
+  for (size_t v = 0; v < data.train.size(); ++v) {
+    if (rank_of_view(v, ranks) != rank) continue;
+    std::array<std::vector<double>, 3> ratios;
+    for (const TrackSample& s : track[v])
       for (int c = 0; c < 3; ++c) {
         const float point = data.colors[s.point][c] / 255.0f,
                     photo = byte_to_float(data.train[v].image.pixels[3 * size_t(s.pixel) + c]);
         if (point > kDarkest && point < 0.95f && photo > 0.02f && photo < 0.98f)
-          ratios[v][c].push_back(std::log2(double(photo) / point));
+          ratios[c].push_back(std::log2(double(photo) / point));
       }
-    }
-  std::vector<double> brightness, open_shares;
-  std::array<std::vector<double>, 3> balance;  // per channel, over views
-  for (size_t v = 0; v < data.train.size(); ++v) {
-    ViewEvidence e{data.train[v].name, samples[v], {0, 0, 0}, 0.0f};
-    if (samples[v] >= r.min_samples_per_view) {
+    double* out = &judged_values[kFields * v];
+    if (track[v].size() >= size_t(r.min_samples_per_view)) {
       const TrainView& view = data.train[v];
       std::vector<long long> pixels;
       for (const TrackSample& s : track[v]) pixels.push_back(s.pixel);
       const OpenSkyCells sky = open_sky_cells(view.camera, view.image, pixels, r.sky_grid, r.sky_smooth_ratio);
-      e.open_top_share = float(sky.share(view.camera.width, view.camera.height));
-      open_shares.push_back(e.open_top_share);
+      out[3] = float(sky.share(view.camera.width, view.camera.height));
     }
     bool judged = true;
     for (int c = 0; c < 3; ++c) {
-      judged &= ratios[v][c].size() >= size_t(r.min_samples_per_view);
-      e.log2_gain[c] = float(median(ratios[v][c]));
+      judged &= ratios[c].size() >= size_t(r.min_samples_per_view);
+      out[c] = float(median(ratios[c]));
     }
-    e.gain_judged = judged;
-    if (judged) {
+    out[4] = judged;
+  }
+  // Every rank receives every view's values (each from its own rank; zeros elsewhere).
+  if (comm) comm->sum(std::span(judged_values));
+  std::vector<double> brightness, open_shares;
+  std::array<std::vector<double>, 3> balance;  // per channel, over views
+  for (size_t v = 0; v < data.train.size(); ++v) {
+    const double* in = &judged_values[kFields * v];
+    ViewEvidence e{data.train[v].name, int(track[v].size()), {float(in[0]), float(in[1]), float(in[2])}, 0.0f};
+    if (track[v].size() >= size_t(r.min_samples_per_view)) {
+      e.open_top_share = float(in[3]);
+      open_shares.push_back(e.open_top_share);
+    }
+    e.gain_judged = in[4] != 0;
+    if (e.gain_judged) {
       const double mean_gain = (e.log2_gain[0] + e.log2_gain[1] + e.log2_gain[2]) / 3.0;
       brightness.push_back(mean_gain);
       for (int c = 0; c < 3; ++c) balance[c].push_back(e.log2_gain[c] - mean_gain);
@@ -184,8 +195,8 @@ EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& r)
   return ev;
 }
 
-std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules) {
-  const EffectsEvidence ev = examine_effects(data, rules);
+std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules, Communicator* comm) {
+  const EffectsEvidence ev = examine_effects(data, rules, comm);
   std::vector<std::array<float, 3>> gains(data.train.size(), {1.0f, 1.0f, 1.0f});
   for (size_t v = 0; v < ev.views.size(); ++v)
     if (ev.views[v].gain_judged)

@@ -71,8 +71,13 @@ TrainConfig effective_config(TrainConfig config, const TrainingData& data) {
   return config;
 }
 
-Trainer::Trainer(const TrainingData& data, TrainConfig config)
-    : data_(data), config_(std::move(config)), rng_(config_.seed) {
+Trainer::Trainer(const TrainingData& data, TrainConfig config, Communicator* comm)
+    : data_(data),
+      config_(std::move(config)),
+      comm_(comm && comm->size() > 1 ? comm : nullptr),
+      rank_(comm_ ? comm_->rank() : 0),
+      ranks_(comm_ ? comm_->size() : 1),
+      rng_(config_.seed) {
   // Adam, the loss and the initialization are plain `omp parallel` loops: without this a
   // --threads 1 run would still start a team per core (and spin in it).
   if (config_.threads > 0) omp_set_num_threads(config_.threads);
@@ -82,8 +87,17 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
     throw std::invalid_argument("batch " + std::to_string(config_.batch) + " must be 1.." +
                                 std::to_string(std::max(1, config_.densify.refine_every)) +
                                 " (at most densify.refine_every views per step); use a smaller --batch");
-  for (const TrainView& v : data_.train) {
+  // The per-image models' shared networks take one update per view, in order: that sequence
+  // does not divide between ranks (docs/METHOD.md §6, ranks).
+  if (ranks_ > 1 && (config_.appearance.enabled || config_.background.enabled))
+    throw std::invalid_argument(
+        "the appearance and background models train in one process only, and this job has " + std::to_string(ranks_) +
+        " ranks: run it without mpirun/srun, or choose the effects without them (--effects distractors or "
+        "--static-only)");
+  for (size_t i = 0; i < data_.train.size(); ++i) {
+    const TrainView& v = data_.train[i];
     v.camera.validate();
+    if (!owns_view(i)) continue;  // another rank holds its photo
     if (v.image.width != v.camera.width || v.image.height != v.camera.height || v.image.channels != 3)
       throw std::invalid_argument("training view " + v.name + ": image size does not match its camera");
   }
@@ -123,7 +137,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
   config_ = effective_config(std::move(config_), data_);
   std::vector<uint8_t> transient;
   if (config_.transient_points.action != TransientPointAction::keep) {
-    transient = transient_points(data_, config_.transient_points);
+    transient = transient_points(data_, config_.transient_points, comm_);
     for (const uint8_t t : transient) transient_point_count += t;
   }
   GaussianSet initial = initial_gaussians(data_, config_, rng_, transient);
@@ -165,6 +179,7 @@ Trainer::Trainer(const TrainingData& data, TrainConfig config)
                                 ") while background.share_appearance_embedding is on");
   downscaled_.resize(data_.train.size());
   warn = [](const std::string& msg) { std::fprintf(stderr, "warning: %s\n", msg.c_str()); };
+  keep_own_share();
 }
 
 void Trainer::cull_camera_path(RefineReport& report) {
@@ -287,19 +302,30 @@ StepStats Trainer::step() {
   stats.views = views;
   batch_views_.resize(size_t(views));
   StepProfiler profile;
+  const CommTotals comm_before = comm_ ? comm_->totals() : CommTotals{};
+  bool first = true;  // the first of the batch's views this rank holds starts the sums
   for (int b = 0; b < views; ++b) {
     batch_views_[size_t(b)].index = step_ + b;
-    train_view(batch_views_[size_t(b)], b == 0, profile, stats);
+    first &= !train_view(batch_views_[size_t(b)], first, profile, stats);
   }
+  if (comm_) profile.time(&StepTimings::optimizer, [&] { sum_batch_over_ranks(stats); });
   stats.loss /= views, stats.psnr /= views;
   const int64_t event = update_static(views, profile, stats);
 
-  // Each view's seeding, then every view's refinement when it is due in this batch.
+  // Each view's seeding, then every view's refinement when it is due in this batch. A view's
+  // seeding draws from the random state on its own rank; the others follow that state.
   const bool refine_distractors_now = event >= 0 && distractor_refine_due(event, static_cast<int>(data_.train.size()),
                                                                           config_.densify, config_.distractors);
   if (config_.distractors.enabled)
     for (BatchView& bv : batch_views_)
-      if (view_seed_due[bv.view]) profile.time(&StepTimings::distractor, [&] { stats.reseeded += seed_if_due(bv); });
+      if (view_seed_due[bv.view])
+        profile.time(&StepTimings::distractor, [&] {
+          if (owns_view(size_t(bv.view)))
+            stats.reseeded += seed_if_due(bv);
+          else
+            view_seed_due[bv.view] = 0;
+          if (comm_) follow_random_state(rank_of_view(size_t(bv.view), ranks_));
+        });
   if (refine_distractors_now) {
     const BatchView& at = batch_views_[size_t(event - step_)];
     profile.time(&StepTimings::distractor,
@@ -307,6 +333,11 @@ StepStats Trainer::step() {
   }
   stats.timings = profile.timings;
   stats.gaussians = gaussians_.size();
+  if (comm_) {
+    const CommTotals after = comm_->totals();
+    stats.comm_bytes = after.bytes - comm_before.bytes;
+    stats.comm_seconds = after.seconds - comm_before.seconds;
+  }
   step_ += views;
   return stats;
 }
@@ -328,8 +359,11 @@ int64_t Trainer::update_static(int views, StepProfiler& profile, StepStats& stat
     if (event < 0) return;
     // Judged at the image size of the view whose index the schedule names.
     const Camera& at = batch_views_[size_t(event - step_)].camera;
+    // Every rank decides on the job's statistics with the same random state: the same decisions.
+    if (comm_) reduce_static_statistics();
     stats.refine = refine_gaussians(gaussians_, config_.densify, event, std::max(at.width, at.height),
                                     static_cast<int>(data_.train.size()), rng_);
+    if (comm_) keep_own_share();
     if (stats.refine.ran && !camera_path_.empty()) cull_camera_path(stats.refine);
   });
   return event;

@@ -12,7 +12,13 @@ namespace desplat {
 void Trainer::refine_all_distractors(int64_t index, int image_size, int factor, StepStats& stats) {
   stats.distractor_refine.ran = true;
   const DistractorSettings& ds = config_.distractors;
+  // In view order; a view's refinement draws from the random state on its own rank, and the
+  // other ranks follow that state before the next view's.
   for (size_t v = 0; v < distractors_.size(); ++v) {
+    if (!owns_view(v)) {
+      follow_random_state(rank_of_view(v, ranks_));
+      continue;
+    }
     TrainableGaussians& d = distractors_[v];
     const Camera& full = data_.train[v].camera;
     const int64_t pixels = int64_t(full.width) * full.height;
@@ -44,33 +50,47 @@ void Trainer::refine_all_distractors(int64_t index, int image_size, int factor, 
     const bool uncovered = ds.seed_uncovered && uncovered_seed_count(d.size(), view_static_unexplained[v],
                                                                      view_composite_unexplained[v], pixels, ds) > 0;
     view_seed_due[v] = index < config_.densify.stop_split_at && seeding_settled(index) && (starved || uncovered);
+    if (comm_) follow_random_state(rank_);
   }
+  // Every rank learns which views seed at their next step (Trainer::step).
+  if (comm_) share_view_values();
 }
 
 void Trainer::seed_from_transient_points(const std::vector<uint8_t>& transient) {
   // One distractor on the pixel each transient point projects to, in every training view
   // that observes it: the same seeds the growth rules place on uncovered pixels.
   for (size_t v = 0; v < data_.train.size(); ++v) {
-    const TrainView& view = data_.train[v];
-    const Camera& c = view.camera;
-    std::vector<uint8_t> mask(size_t(c.width) * c.height, 0);
-    size_t count = 0;
-    for (size_t i = 0; i < transient.size(); ++i) {
-      if (!transient[i]) continue;
-      const std::vector<int32_t>& observers = data_.point_train_views[i];
-      if (!std::binary_search(observers.begin(), observers.end(), int32_t(v))) continue;
-      const long long pixel = c.pixel_of(data_.points[i]);
-      if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;  // off screen or ignored
-      uint8_t& m = mask[size_t(pixel)];
-      count += !m;
-      m = 1;
+    // On the view's own rank, the others following its random state (as refine_all_distractors).
+    if (comm_ && !owns_view(v)) {
+      follow_random_state(rank_of_view(v, ranks_));
+      continue;
     }
-    if (count == 0) continue;
-    const GaussianSet seeds =
-        reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
-    distractors_[v].append(seeds);
-    transient_seeded += int64_t(seeds.size());
+    seed_view_from_transient_points(v, transient);
+    if (comm_) follow_random_state(rank_);
   }
+  if (comm_) comm_->sum(std::span<int64_t>(&transient_seeded, 1));
+}
+
+void Trainer::seed_view_from_transient_points(size_t v, const std::vector<uint8_t>& transient) {
+  const TrainView& view = data_.train[v];
+  const Camera& c = view.camera;
+  std::vector<uint8_t> mask(size_t(c.width) * c.height, 0);
+  size_t count = 0;
+  for (size_t i = 0; i < transient.size(); ++i) {
+    if (!transient[i]) continue;
+    const std::vector<int32_t>& observers = data_.point_train_views[i];
+    if (!std::binary_search(observers.begin(), observers.end(), int32_t(v))) continue;
+    const long long pixel = c.pixel_of(data_.points[i]);
+    if (pixel < 0 || (!view.keep.empty() && view.keep[size_t(pixel)] == 0)) continue;  // off screen or ignored
+    uint8_t& m = mask[size_t(pixel)];
+    count += !m;
+    m = 1;
+  }
+  if (count == 0) return;
+  const GaussianSet seeds =
+      reseed_distractors(c, mask, to_float(view.image).pixels, count, config_.distractors, rng_());
+  distractors_[v].append(seeds);
+  transient_seeded += int64_t(seeds.size());
 }
 
 bool resolution_settled(const TrainConfig& config, int64_t step, int64_t period) {

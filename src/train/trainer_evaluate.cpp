@@ -157,7 +157,16 @@ ViewLayers Trainer::render_layers(size_t train_view, const std::array<float, 3>&
 
 std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) const {
   std::vector<ViewMetrics> out;
-  for (const TrainView& v : views) {
+  for (size_t k = 0; k < views.size(); ++k) {
+    const TrainView& v = views[k];
+    // In a job of several ranks each view is scored on the rank holding its photo.
+    if (rank_of_view(k, ranks_) != rank_) {
+      out.push_back(ViewMetrics{.name = v.name});
+      continue;
+    }
+    if (v.image.width != v.camera.width || v.image.height != v.camera.height)
+      throw std::invalid_argument("evaluate: view " + v.name + " has no photo of its camera's size on rank " +
+                                  std::to_string(rank_));
     // The halves: the right one is scored under either protocol; the left one is where the
     // Photo Tourism protocol fits a model's embeddings (the view's own mask applies to both).
     const int w = v.camera.width, h = v.camera.height;
@@ -183,6 +192,17 @@ std::vector<ViewMetrics> Trainer::evaluate(const std::vector<TrainView>& views) 
       m.ssim = ssim(img.pixels, photo.pixels, w, h, whole);
     }
     out.push_back(std::move(m));
+  }
+  if (comm_) {
+    std::vector<double> scores(4 * out.size(), 0.0);
+    for (size_t k = 0; k < out.size(); ++k)
+      if (rank_of_view(k, ranks_) == rank_)
+        scores[4 * k] = out[k].psnr, scores[4 * k + 1] = out[k].ssim, scores[4 * k + 2] = out[k].psnr_right_half,
+                   scores[4 * k + 3] = out[k].ssim_right_half;
+    comm_->sum(std::span(scores));
+    for (size_t k = 0; k < out.size(); ++k)
+      out[k].psnr = scores[4 * k], out[k].ssim = scores[4 * k + 1], out[k].psnr_right_half = scores[4 * k + 2],
+      out[k].ssim_right_half = scores[4 * k + 3];
   }
   return out;
 }

@@ -15,9 +15,14 @@
 
 namespace desplat {
 
-void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats) {
+bool Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats) {
   const int64_t t = bv.index;
   const int view = next_view();
+  std::array<float, 3> bg_color = config_.eval_background;
+  if (config_.random_background && !config_.background.enabled) {
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    bg_color = {u(rng_), u(rng_), u(rng_)};
+  }
   const int factor = config_.downscale_at(t);
   if (factor == 1) {  // the schedule never goes back to a coarser level: give the pyramid's memory back
     for (std::vector<ByteImage>& levels : downscaled_)
@@ -26,16 +31,18 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
   }
   bv.view = view, bv.factor = factor;
   bv.camera = downscale_camera(data_.train[view].camera, factor);
+  if (!owns_view(size_t(view))) {
+    // Its rank records the view's statistics; the first view after a reset marks them begun
+    // on every rank (accumulate_statistics' first-view rule applies once, on that view's rank).
+    if (t < config_.densify.stop_split_at) gaussians_.statistics_empty = false;
+    bv.uncovered.clear();
+    return false;
+  }
   const Camera& cam = bv.camera;
   const FloatImage& target = target_at(view, factor);
   const std::span<const float> keep = keep_at(view, factor);
   const size_t pixels = size_t(cam.width) * cam.height;
   const RasterSettings rs = raster_settings_at(t);
-  std::array<float, 3> bg_color = config_.eval_background;
-  if (config_.random_background && !config_.background.enabled) {
-    std::uniform_real_distribution<float> u(0.0f, 1.0f);
-    bg_color = {u(rng_), u(rng_), u(rng_)};
-  }
   // A view whose distractors were all culled has no second pass at all.
   TrainableGaussians* distractors = nullptr;
   if (config_.distractors.enabled && distractors_[view].size() > 0) distractors = &distractors_[view];
@@ -181,6 +188,7 @@ void Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
       stats.nonfinite_pruned +=
           prune_nonfinite(*distractors, t, [&] { return "distractor of view " + data_.train[view].name; });
     });
+  return true;
 }
 
 }  // namespace desplat

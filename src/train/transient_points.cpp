@@ -47,7 +47,7 @@ float color_difference(const TrainView& view, const std::array<float, 3>& x, con
 
 }  // namespace
 
-std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& s) {
+std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& s, Communicator* comm) {
   const size_t n = data.points.size();
   std::vector<uint8_t> transient(n, 0);
   if (data.point_track_images.empty() && data.point_train_views.empty()) return transient;
@@ -58,18 +58,28 @@ std::vector<uint8_t> transient_points(const TrainingData& data, const TransientP
       if (v < 0 || size_t(v) >= data.train.size())
         throw std::invalid_argument("transient_points: a track names a training view that does not exist");
   const std::vector<std::array<float, 3>> gains =
-      s.per_view_gain ? view_gains(data) : std::vector<std::array<float, 3>>(data.train.size(), {1.0f, 1.0f, 1.0f});
+      s.per_view_gain ? view_gains(data, {}, comm)
+                      : std::vector<std::array<float, 3>>(data.train.size(), {1.0f, 1.0f, 1.0f});
+  // Each view's colour evidence on the rank holding its photo; a point any view disagrees
+  // with is transient.
+  const int rank = comm ? comm->rank() : 0, ranks = comm ? comm->size() : 1;
   for (size_t i = 0; i < n; ++i) {
     if (int64_t(data.point_track_images[i]) < s.min_track_images) {
-      transient[i] = 1;
+      transient[i] = rank == 0;  // counted once in the sum over ranks
       continue;
     }
     for (const int32_t v : data.point_train_views[i]) {
+      if (rank_of_view(size_t(v), ranks) != rank) continue;
       if (color_difference(data.train[v], data.points[i], data.colors[i], gains[size_t(v)]) > s.color_tolerance) {
         transient[i] = 1;
         break;
       }
     }
+  }
+  if (comm) {
+    std::vector<int64_t> votes(transient.begin(), transient.end());
+    comm->sum(std::span(votes));
+    for (size_t i = 0; i < n; ++i) transient[i] = votes[i] > 0;
   }
   return transient;
 }

@@ -156,7 +156,8 @@ ProbeView probe_view(const Trainer& probe, size_t v, int factor) {
 }
 
 std::optional<TransientEvidence> probe_transients(const TrainingData& data, TrainConfig config,
-                                                  const TransientRules& rules, const std::atomic<bool>* stop) {
+                                                  const TransientRules& rules, const std::atomic<bool>* stop,
+                                                  Communicator* comm) {
   if (rules.probe_steps < 1) throw std::invalid_argument("probe_transients: probe_steps must be at least 1");
   if (data.train.empty()) return judge_transients({}, rules);
   // Every probe step at 1/factor: the schedule's factor is 2^num_downscales.
@@ -167,15 +168,23 @@ std::optional<TransientEvidence> probe_transients(const TrainingData& data, Trai
   config.iterations = rules.probe_steps;
   config.num_downscales = downscales;
   config.resolution_schedule = rules.probe_steps + 1;
-  Trainer probe(data, config);
+  Trainer probe(data, config, comm);
   for (int s = 0; s < rules.probe_steps; ++s) {
-    if (stop && stop->load()) return std::nullopt;
+    if (any_rank(comm, stop && stop->load())) return std::nullopt;
     probe.step();
   }
 
+  // Each view's maps on the rank holding its photo; every rank judges all of them.
   const int factor = 1 << downscales;
   std::vector<ProbeView> views(data.train.size());
-  for (size_t v = 0; v < data.train.size(); ++v) views[v] = probe_view(probe, v, factor);
+  for (size_t v = 0; v < data.train.size(); ++v) {
+    if (probe.owns_view(v)) views[v] = probe_view(probe, v, factor);
+    if (!comm || comm->size() == 1) continue;
+    const int holder = rank_of_view(v, comm->size());
+    views[v].camera = downscale_camera(data.train[v].camera, factor);
+    broadcast_vector(*comm, views[v].error, holder);
+    broadcast_vector(*comm, views[v].depth, holder);
+  }
   return judge_transients(views, rules);
 }
 

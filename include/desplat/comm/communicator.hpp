@@ -19,8 +19,18 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace desplat {
+
+// What one rank's collectives cost since its communicator opened: the payload bytes of every
+// call (the array's size, for sum and broadcast alike) and the wall seconds spent inside them.
+// A one-process communicator moves nothing and counts nothing.
+struct CommTotals {
+  int64_t bytes = 0;
+  double seconds = 0;
+  int64_t calls = 0;
+};
 
 class Communicator {
  public:
@@ -39,7 +49,30 @@ class Communicator {
   [[noreturn]] virtual void abort(const std::string& message) = 0;
   // Which implementation this is: "single process" or "MPI".
   virtual const char* kind() const = 0;
+  CommTotals totals() const { return totals_; }
+
+ protected:
+  CommTotals totals_;
 };
+
+// Collective: whether `flag` is set on any rank (on `comm`, or this process's when null).
+inline bool any_rank(Communicator* comm, bool flag) {
+  if (!comm || comm->size() == 1) return flag;
+  int64_t n = flag;
+  comm->sum(std::span<int64_t>(&n, 1));
+  return n > 0;
+}
+
+// Collectives over values of any layout, built on broadcast (every rank passes its own
+// value; every rank returns with root's). The vector's length travels first.
+void broadcast_string(Communicator& comm, std::string& text, int root);
+template <typename T>
+void broadcast_vector(Communicator& comm, std::vector<T>& values, int root) {
+  int64_t n = int64_t(values.size());
+  comm.broadcast(std::as_writable_bytes(std::span<int64_t>(&n, 1)), root);
+  values.resize(size_t(n));
+  comm.broadcast(std::as_writable_bytes(std::span<T>(values)), root);
+}
 
 // One process: sum and broadcast leave the values as they are, barrier returns at once, abort
 // ends this process.

@@ -23,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "desplat/comm/communicator.hpp"
 #include "desplat/jobs/model_folder.hpp"
 #include "desplat/jobs/training_run.hpp"
 #include "desplat/train/train_config.hpp"
@@ -54,11 +55,12 @@ struct ResolvedSettings {
   std::string effects_chosen_by;    // "auto" or "the command line and preset"
   nlohmann::json effects_evidence;  // auto's evidence (null when the effects were given)
 };
-// `resumed` is the model's config.json on --resume (else null). Returns nullopt when
+// With `comm` of several ranks it is a collective (auto's evidence and probe), every rank
+// resolving the same settings. `resumed` is the model's config.json on --resume (else null). Returns nullopt when
 // `stop_requested` interrupted the transient probe (nothing was written).
 std::optional<ResolvedSettings> resolve_settings(const RequestedSettings& requested, const TrainingRunOptions& options,
                                                  const TrainingData& data, const ModelFolder::Config* resumed,
                                                  const std::string& record_name,
-                                                 const std::atomic<bool>& stop_requested);
+                                                 const std::atomic<bool>& stop_requested, Communicator* comm = nullptr);
 
 }  // namespace desplat

@@ -20,6 +20,7 @@
 #include <optional>
 #include <string>
 
+#include "desplat/comm/communicator.hpp"
 #include "desplat/io/scene.hpp"
 #include "desplat/train/training_data.hpp"
 
@@ -73,9 +74,17 @@ struct TrainingRunOptions {
 // file or setting, the problem and what to do); every check of the settings and the inputs
 // runs before anything is written to out_dir (SfM on images_dir aside, which writes
 // out_dir/sfm), so a refused run leaves no outputs that would block the next one.
-int run_training(const TrainingRunOptions& options, const std::atomic<bool>& stop_requested);
+// With `comm` of several ranks (mpirun or srun; docs/METHOD.md §6, ranks) this is one rank of a
+// data-parallel job: every rank calls it alike; each loads only its own views' photos, rank 0
+// alone writes out_dir, and an error on any rank ends the job (the caller aborts it).
+int run_training(const TrainingRunOptions& options, const std::atomic<bool>& stop_requested,
+                 Communicator* comm = nullptr);
 
-// Loads a scene and its pixels into TrainingData (normalized frame).
-TrainingData load_training_data(const Scene& scene);
+// Loads a scene and its pixels into TrainingData (normalized frame). As rank `rank` of
+// `ranks` only the photos and masks of that rank's views (rank_of_view) are read.
+TrainingData load_training_data(const Scene& scene, int rank = 0, int ranks = 1);
+// Scene view i's photo in 8 bits and its mask (empty without one), as load_training_data holds
+// them (masked pixels zeroed). Returns whether the file held values 8 bits round.
+bool load_view_photo(const Scene& scene, size_t i, ByteImage& photo, std::vector<uint8_t>& keep);
 
 }  // namespace desplat

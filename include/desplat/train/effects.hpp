@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "desplat/comm/communicator.hpp"
 #include "desplat/train/train_config.hpp"
 #include "desplat/train/training_data.hpp"
 
@@ -73,12 +74,15 @@ struct EffectsEvidence {
 };
 
 // Throws std::invalid_argument when the track information does not match the points.
-EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& rules = {});
+// In a job of several ranks (`comm`, collective) each view is judged on the rank holding its
+// photo (rank_of_view) and every rank returns the whole evidence.
+EffectsEvidence examine_effects(const TrainingData& data, const EffectsRules& rules = {}, Communicator* comm = nullptr);
 
 // Each training view's colour gain against the SfM point colours, per channel (data.train
 // order): 2^log2_gain where the view's gain is judged (ViewEvidence::gain_judged), else 1 (no
 // evidence). A point of colour c looks like min(1, gain · c) in that view.
-std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules = {});
+std::vector<std::array<float, 3>> view_gains(const TrainingData& data, const EffectsRules& rules = {},
+                                             Communicator* comm = nullptr);
 
 // --effects auto, appearance and background: `configured` (the preset's and --config's set) plus
 // appearance and background when `evidence` calls for them; a line of `why` for each says why it

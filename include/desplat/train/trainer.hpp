@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "desplat/comm/communicator.hpp"
 #include "desplat/core/camera.hpp"
 #include "desplat/core/image.hpp"
 #include "desplat/core/stopwatch.hpp"
@@ -120,6 +121,10 @@ struct StepStats {
   // Gaussians visible in the view (the optimizer updates all `gaussians`).
   int64_t static_pairs = 0;
   size_t static_visible = 0;
+  // This rank's collectives in the step (CommTotals; zero in one process). Their time is
+  // also inside the timing blocks that called them.
+  int64_t comm_bytes = 0;
+  double comm_seconds = 0;
 };
 
 // How a test view was scored.
@@ -157,8 +162,13 @@ TrainConfig effective_config(TrainConfig config, const TrainingData& data);
 
 class Trainer {
  public:
-  // `data` must outlive the trainer.
-  Trainer(const TrainingData& data, TrainConfig config);
+  // `data` and `comm` must outlive the trainer. With a communicator of more than one rank the
+  // trainer is one rank of a data-parallel job (docs/METHOD.md §6, ranks): `data` holds the
+  // photos of this rank's views only (rank_of_view; the others' images empty), every rank
+  // holds the same static Gaussians and random state and takes the same steps, and a view's
+  // distractors live on its rank. Every rank must call step(), evaluate(), gather_to_root()
+  // and keep_own_share() alike (they are collectives). Null or one rank: one process.
+  Trainer(const TrainingData& data, TrainConfig config, Communicator* comm = nullptr);
 
   // One optimizer step over min(batch, iterations − current_step()) views (the batch when
   // the run is already at its length).
@@ -175,6 +185,18 @@ class Trainer {
   size_t distractor_count() const;  // over all views
   std::mt19937_64& rng() { return rng_; }
   const std::mt19937_64& rng() const { return rng_; }
+  Communicator* communicator() const { return comm_; }  // null in one process
+  int rank() const { return rank_; }
+  int ranks() const { return ranks_; }
+  // Whether this rank holds training view `view`'s photo, distractors and growth state.
+  bool owns_view(size_t view) const { return rank_of_view(view, ranks_) == rank_; }
+  // Collective, before a checkpoint or the outputs: rank 0 (every rank, in fact) receives every
+  // view's distractors and growth state and the static statistics' totals, so the state it
+  // holds is the whole job's. keep_own_share() returns to training's division of the state.
+  void gather_to_root();
+  // Each rank keeps only its own views' distractors, and ranks other than 0 hold no static
+  // statistics (the job's totals are the sum over ranks). After a restore or a gather.
+  void keep_own_share();
 
   // Renders a view with the static Gaussians ([H, W, 3], clamped): in look.appearance's
   // appearance when given (else the plain colours), over look.background's learned background
@@ -242,6 +264,8 @@ class Trainer {
  private:
   const TrainingData& data_;
   TrainConfig config_;
+  Communicator* comm_ = nullptr;  // null: one process
+  int rank_ = 0, ranks_ = 1;
   TrainableGaussians gaussians_;
   CameraPath camera_path_;  // from the training cameras and sparse points, at construction
   double scene_depth_ = 0;  // median_scene_depth of the same [world units]; 0: no points
@@ -274,13 +298,16 @@ class Trainer {
   std::vector<float> composite_, d_composite_;
   RasterGradients batch_grads_;         // the batch's summed static gradients
   std::vector<uint8_t> batch_visible_;  // [N] visible in any of the batch's views (selective Adam)
+  std::vector<float> packed_;           // ranks: the batch's gradients and flags in one array
 
   int next_view();
   // One view's pass (docs/METHOD.md §4–7): draws the view and its background, renders, takes
   // the loss and the backward, applies its per-view updates (distractors, appearance,
   // background) and adds its static gradient to batch_grads_ and its statistics to the
-  // static buffer's (`first`: the batch's first view, which starts the sums).
-  void train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats);
+  // static buffer's (`first`: the first view of the batch on this rank, which starts the sums).
+  // Every rank draws the view and its random background; only the view's rank trains it.
+  // Returns whether this rank trained it.
+  bool train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats);
   // The static buffer's one Adam step over the batch's `views` views and its refinement when
   // the refinement schedule falls in the batch; returns the refinement's view index, or −1.
   int64_t update_static(int views, StepProfiler& profile, StepStats& stats);
@@ -311,6 +338,18 @@ class Trainer {
   // TransientPointAction::seed: distractors where the transient points project in the
   // training views that observe them.
   void seed_from_transient_points(const std::vector<uint8_t>& transient);
+  void seed_view_from_transient_points(size_t view, const std::vector<uint8_t>& transient);
+  // The ranks' parts of the batch into every rank's batch_grads_ and batch_visible_ (a rank
+  // without a view in the batch adds zeros), and the step's summed statistics.
+  void sum_batch_over_ranks(StepStats& stats);
+  // The static statistics' totals on every rank (sums; the screen radius's maximum), before
+  // a refinement decides on them.
+  void reduce_static_statistics();
+  // Every rank's copy of the random state becomes rank `root`'s: after `root` drew from it
+  // for a view only it holds, the ranks draw on in step.
+  void follow_random_state(int root);
+  // Per-view values only their owner sets: every rank receives the owners' values.
+  void share_view_values();
 };
 
 // Whether step `step` trains at the same resolution as step − period (clamped at 0): the

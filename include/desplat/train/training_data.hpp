@@ -25,6 +25,11 @@ struct TrainView {
   std::vector<uint8_t> keep;
 };
 
+// In a job of several ranks (docs/METHOD.md §6, ranks) each rank's TrainingData holds the
+// photos and masks of its own views only: view i of `train`, and view i of `test`, belongs to
+// rank rank_of_view(i, ranks); the other views keep their name and camera, with an empty image.
+inline int rank_of_view(size_t index, int ranks) { return int(index % size_t(ranks)); }
+
 struct TrainingData {
   std::vector<TrainView> train, test;
   std::vector<std::array<float, 3>> points;  // normalized frame

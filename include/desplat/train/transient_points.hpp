@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "desplat/comm/communicator.hpp"
 #include "desplat/core/gaussians.hpp"
 #include "desplat/train/training_data.hpp"
 
@@ -46,6 +47,9 @@ struct TransientPointSettings {
 // never transient. Colours are compared at the pixel the point projects into (Camera::pixel_of) in each
 // observing training view, where it is in front of the camera and inside the image, against
 // min(1, gain · colour) with the view's per-channel gain (per_view_gain) or the colour itself.
-std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& settings);
+// In a job of several ranks (`comm`, collective) each view's evidence is judged on the rank
+// holding its photo and every rank returns the same answer.
+std::vector<uint8_t> transient_points(const TrainingData& data, const TransientPointSettings& settings,
+                                      Communicator* comm = nullptr);
 
 }  // namespace desplat

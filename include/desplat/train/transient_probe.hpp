@@ -78,8 +78,11 @@ ProbeView probe_view(const Trainer& probe, size_t v, int factor);
 // Trains the probe on `data` with `config` (distractors turned off, rules.probe_steps steps, all at
 // 1/probe_factor resolution), renders every training view in its own look, and judges them.
 // Returns nullopt, having trained less, as soon as `stop` (when given) is set: a Ctrl-C.
+// With `comm` of several ranks the probe is a job of those ranks (Trainer), stopped when any
+// rank's `stop` is set, and every rank returns the same evidence.
 std::optional<TransientEvidence> probe_transients(const TrainingData& data, TrainConfig config,
                                                   const TransientRules& rules = {},
-                                                  const std::atomic<bool>* stop = nullptr);
+                                                  const std::atomic<bool>* stop = nullptr,
+                                                  Communicator* comm = nullptr);
 
 }  // namespace desplat
