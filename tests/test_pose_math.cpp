@@ -75,7 +75,9 @@ std::vector<glm::dmat3> test_rotations() {
     out.push_back(axis_angle(axis, std::numbers::pi));
   for (int k = 0; k < 20000; ++k) {
     const glm::dvec3 axis(normal(rng), normal(rng), normal(rng));
-    const double angle = k % 4 == 0 ? std::numbers::pi : k % 4 == 1 ? 2.0943951 + 1e-3 * normal(rng) : 3.2 * normal(rng);
+    const double angle = k % 4 == 0   ? std::numbers::pi
+                         : k % 4 == 1 ? 2.0943951 + 1e-3 * normal(rng)
+                                      : 3.2 * normal(rng);
     out.push_back(axis_angle(axis, angle));
   }
   return out;
