@@ -1,19 +1,27 @@
-// The project's own camera and pose math against GLM, an independent implementation of the
-// same conventions: the synthetic views' look-at (Eigen, src/synth/camera_path.cpp), the
-// rotation → quaternion the generator writes to images.bin, and the quaternion → rotation the
-// scene loader builds each Camera from (Eigen, src/io/scene_loader.cpp).
+// The project's own camera and pose math against independent implementations of the same
+// conventions: the synthetic views' look-at (Eigen, src/synth/camera_path.cpp) against
+// glm::lookAt; the rotation → quaternion the generator writes to images.bin (GLM,
+// synth::quaternion_of) against a brute-force rotation check and against Eigen's
+// Quaternion(Matrix3), whose bits every scene generated so far holds; and the quaternion →
+// rotation the scene loader builds each Camera from (Eigen, src/io/scene_loader.cpp) against
+// glm::mat3_cast.
 //
 // Conventions (docs/METHOD.md §1): COLMAP's camera looks along +z with x right and y down;
 // GLM's look-at is OpenGL's, looking along −z with y up, so R_colmap = diag(1, −1, −1)·R_gl and
 // t_colmap = diag(1, −1, −1)·t_gl. GLM is column-major: M[c][r] is row r, column c.
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <cstring>
 #include <glm/glm.hpp>
 #include <glm/gtc/matrix_access.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <map>
+#include <numbers>
+#include <random>
 #include <string>
+#include <vector>
 
 #include "desplat/io/colmap.hpp"
 #include "desplat/io/scene.hpp"
@@ -50,7 +58,71 @@ struct TinyScene {
   }
 };
 
+// Rotations that reach every branch of quaternion_of: random ones (mostly trace > 0), half
+// turns about each axis and about random axes (trace −1, each diagonal entry the largest in
+// turn), and turns by nearly π, where the trace is just above or below zero.
+std::vector<glm::dmat3> test_rotations() {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> normal;
+  std::vector<glm::dmat3> out;
+  const auto axis_angle = [](glm::dvec3 axis, double angle) {
+    // Rodrigues: R = cos θ·I + sin θ·[a]× + (1 − cos θ)·a·aᵀ, column-major.
+    const glm::dvec3 a = axis / std::sqrt(glm::dot(axis, axis));
+    const glm::dmat3 skew(glm::dvec3(0, a.z, -a.y), glm::dvec3(-a.z, 0, a.x), glm::dvec3(a.y, -a.x, 0));
+    return std::cos(angle) * glm::dmat3(1.0) + std::sin(angle) * skew + (1 - std::cos(angle)) * glm::outerProduct(a, a);
+  };
+  for (const glm::dvec3 axis : {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1)})
+    out.push_back(axis_angle(axis, std::numbers::pi));
+  for (int k = 0; k < 20000; ++k) {
+    const glm::dvec3 axis(normal(rng), normal(rng), normal(rng));
+    const double angle = k % 4 == 0   ? std::numbers::pi
+                         : k % 4 == 1 ? 2.0943951 + 1e-3 * normal(rng)
+                                      : 3.2 * normal(rng);
+    out.push_back(axis_angle(axis, angle));
+  }
+  return out;
+}
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
 }  // namespace
+
+// The quaternion's rotation is the matrix it came from, the quaternion is unit length, and
+// every branch (w, x, y or z largest) is taken.
+TEST(PoseMath, QuaternionOfARotationRotatesAsTheMatrixDoes) {
+  int branch[4] = {};
+  for (const glm::dmat3& R : test_rotations()) {
+    const glm::dquat q = synth::quaternion_of(R);
+    EXPECT_NEAR(glm::length(q), 1.0, 1e-14);
+    // q rotates a vector as R does: v' = q·v·q*, written out with the Hamilton product.
+    for (const glm::dvec3 v : {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1)}) {
+      const glm::dvec3 u(q.x, q.y, q.z);
+      const glm::dvec3 rotated = v + 2.0 * q.w * glm::cross(u, v) + 2.0 * glm::cross(u, glm::cross(u, v));
+      const glm::dvec3 expected = R * v;
+      for (int a = 0; a < 3; ++a) EXPECT_NEAR(rotated[a], expected[a], 1e-14);
+    }
+    const double trace = R[0][0] + R[1][1] + R[2][2];
+    const int largest = trace > 0 ? 0 : R[1][1] > std::max(R[0][0], R[2][2]) ? 2 : R[2][2] > R[0][0] ? 3 : 1;
+    ++branch[largest];
+  }
+  for (int b = 0; b < 4; ++b) EXPECT_GT(branch[b], 100) << "branch " << b;
+}
+
+// images.bin keeps the bits of the scenes generated so far, which Eigen's Quaternion(Matrix3)
+// wrote: every component is bit for bit Eigen's.
+TEST(PoseMath, QuaternionOfIsEigensQuaternionBitForBit) {
+  for (const glm::dmat3& R : test_rotations()) {
+    Eigen::Matrix3d E;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) E(r, c) = R[c][r];
+    const Eigen::Quaterniond expected(E);
+    const glm::dquat q = synth::quaternion_of(R);
+    ASSERT_TRUE(same_bits(q.w, expected.w()) && same_bits(q.x, expected.x()) && same_bits(q.y, expected.y()) &&
+                same_bits(q.z, expected.z()))
+        << "(" << q.w << ", " << q.x << ", " << q.y << ", " << q.z << ") vs Eigen's (" << expected.w() << ", "
+        << expected.x() << ", " << expected.y() << ", " << expected.z() << ")";
+  }
+}
 
 TEST(PoseMath, SynthLookAtIsGlmLookAtInColmapAxes) {
   const glm::dvec3 z_up(0, 0, 1), y_up(0, 1, 0);

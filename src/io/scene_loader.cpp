@@ -81,8 +81,10 @@ std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_s
 
 // ---- Normalization and poses -------------------------------------------------------------------
 
-// In Eigen rather than GLM: glm::mat3_cast(glm::normalize(q)) rounds differently, and every
-// Camera trained on comes from here (tests/test_pose_math.cpp compares the two).
+// In Eigen rather than GLM: Eigen's normalized() adds the four squares unfused (one SIMD
+// packet) and divides by the root, while GLM's scalar sums and mat3_cast's products fuse under
+// the build's FMA contraction, and every Camera trained on comes from here, so trained models
+// would change in their last bits (tests/test_pose_math.cpp compares the two).
 Eigen::Matrix3d rotation_of(const colmap::Image& image) {
   const auto& q = image.qvec_wxyz;
   return Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();

@@ -29,9 +29,11 @@ colmap::Camera make_lens(const CameraSpec& spec) {
   return cam;
 }
 
-// In Eigen rather than GLM: GLM's normalize, cross and products round differently, so the poses
-// the generator writes to images.bin would change in their last bits (docs/ARCHITECTURE.md,
-// "Which library owns what"); tests/test_pose_math.cpp checks this against glm::lookAt.
+// In Eigen rather than GLM: with the build's FMA contraction Eigen's normalized() adds x² + y²
+// unfused (one SIMD packet) and fuses z² into the sum, and its matrix-vector product groups its
+// terms as its SIMD packets do, which GLM's scalar code compiles differently, so the poses written
+// to images.bin would change in their last bits (docs/ARCHITECTURE.md, "Which library owns
+// what"); tests/test_pose_math.cpp checks the result against glm::lookAt.
 ViewPose look_at(const Vector3d& center, const Vector3d& target) {
   const Vector3d forward = (target - center).normalized();
   // Looking straight up or down: any horizontal "right" will do.
@@ -45,6 +47,32 @@ ViewPose look_at(const Vector3d& center, const Vector3d& target) {
   pose.center = center;
   pose.t_cw = -pose.R_cw * center;
   return pose;
+}
+
+// Shoemake's method as Eigen's Quaternion(Matrix3) evaluates it, so images.bin keeps the bits of
+// the scenes already generated: the w branch whenever the trace R00 + (R11 + R22) is positive
+// (glm::quat_cast instead takes the branch of the largest component and sums the trace left to
+// right).
+glm::dquat quaternion_of(const glm::dmat3& R) {
+  const auto m = [&R](int row, int col) { return R[col][row]; };
+  const double trace = m(0, 0) + (m(1, 1) + m(2, 2));
+  if (trace > 0) {
+    const double s = std::sqrt(trace + 1);
+    const double f = 0.5 / s;
+    return {0.5 * s, (m(2, 1) - m(1, 2)) * f, (m(0, 2) - m(2, 0)) * f, (m(1, 0) - m(0, 1)) * f};
+  }
+  // From the largest diagonal entry i (the first of equal ones) and the two axes after it.
+  int i = 0;
+  if (m(1, 1) > m(0, 0)) i = 1;
+  if (m(2, 2) > m(i, i)) i = 2;
+  const int j = (i + 1) % 3, k = (j + 1) % 3;
+  const double s = std::sqrt(m(i, i) - m(j, j) - m(k, k) + 1);
+  const double f = 0.5 / s;
+  glm::dvec3 xyz;
+  xyz[i] = 0.5 * s;
+  xyz[j] = (m(j, i) + m(i, j)) * f;
+  xyz[k] = (m(k, i) + m(i, k)) * f;
+  return {(m(k, j) - m(j, k)) * f, xyz.x, xyz.y, xyz.z};
 }
 
 std::vector<ViewPose> camera_path(const ViewsSpec& v, uint64_t seed) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <glm/gtc/quaternion.hpp>
 #include <vector>
 
 #include "desplat/io/colmap.hpp"
@@ -23,6 +24,10 @@ colmap::Camera make_lens(const CameraSpec& spec);
 
 // The pose looking from `center` at `target` with world z as "up" in the image.
 ViewPose look_at(const Eigen::Vector3d& center, const Eigen::Vector3d& target);
+
+// The unit quaternion of a rotation matrix (a proper rotation; GLM is column-major, R[c][r]),
+// as images.bin stores R_cw.
+glm::dquat quaternion_of(const glm::dmat3& R);
 
 // views.count poses in view order (deterministic in `seed` when position_jitter > 0).
 std::vector<ViewPose> camera_path(const ViewsSpec& views, uint64_t seed);

@@ -66,7 +66,8 @@ std::vector<Primitive> make_distractors(const DistractorSpec& spec, const ViewPo
     o.texture.detail = 0.2;
     Primitive p = make_primitive(o);
     // Any orientation: a uniformly random rotation from a normalized Gaussian quaternion, taken
-    // in the camera's frame so that views drawing the same stream see the same silhouette.
+    // in the camera's frame so that views drawing the same stream see the same silhouette
+    // (Eigen, as the scene loader's rotations, to keep the generated scenes' bits).
     const Eigen::Quaterniond q(rng.normal(), rng.normal(), rng.normal(), rng.normal());
     p.to_local = q.normalized().toRotationMatrix() * pose.R_cw;
     out.push_back(p);

@@ -1,6 +1,6 @@
 // generate_scene: lays out the views, renders each, applies the requested effects, samples
 // the sparse points and writes the capture layout of synth.hpp.
-#include <Eigen/Geometry>
+#include <Eigen/Core>
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -69,8 +69,11 @@ colmap::Image colmap_image(int k, int count, const ViewPose& pose) {
   image.id = static_cast<uint32_t>(k + 1);
   image.camera_id = 1;
   image.name = view_name(k, count);
-  const Eigen::Quaterniond q(pose.R_cw);
-  image.qvec_wxyz = {q.w(), q.x(), q.y(), q.z()};
+  glm::dmat3 R;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) R[c][r] = pose.R_cw(r, c);
+  const glm::dquat q = quaternion_of(R);
+  image.qvec_wxyz = {q.w, q.x, q.y, q.z};
   image.tvec = {pose.t_cw.x(), pose.t_cw.y(), pose.t_cw.z()};
   return image;
 }

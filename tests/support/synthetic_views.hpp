@@ -7,6 +7,7 @@
 #include <cmath>
 #include <random>
 
+#include "desplat/core/spherical_harmonics.hpp"
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/trainer.hpp"
 
@@ -47,7 +48,7 @@ inline GaussianSet ground_truth_scene(int count, unsigned seed) {
     for (int k = 0; k < 3; ++k) g.means[3 * i + k] = p[k], g.log_scales[3 * i + k] = std::log(0.024f + 0.024f * c(rng));
     for (int k = 0; k < 4; ++k) g.quats[4 * i + k] = u(rng);
     g.opacity_logits[i] = 2.0f;
-    for (int k = 0; k < 3; ++k) g.colors[3 * i + k] = (c(rng) - 0.5f) / 0.28209479f;
+    for (int k = 0; k < 3; ++k) g.colors[3 * i + k] = (c(rng) - 0.5f) / float(kShBand0);
   }
   return g;
 }
@@ -76,7 +77,7 @@ inline TrainingData synthetic_training_data(int views, int width, int height, un
         {truth.means[3 * i] + noise(rng), truth.means[3 * i + 1] + noise(rng), truth.means[3 * i + 2] + noise(rng)});
     std::array<uint8_t, 3> rgb;
     for (int k = 0; k < 3; ++k)
-      rgb[k] = uint8_t(std::lround(std::clamp(truth.colors[3 * i + k] * 0.28209479f + 0.5f, 0.0f, 1.0f) * 255));
+      rgb[k] = uint8_t(std::lround(std::clamp(truth.colors[3 * i + k] * float(kShBand0) + 0.5f, 0.0f, 1.0f) * 255));
     data.colors.push_back(rgb);
   }
   return data;

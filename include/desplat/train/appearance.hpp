@@ -43,8 +43,9 @@ struct AppearanceSettings {
   int test_steps = 128;
   float test_lr = 0.01f;
   // Where that fit starts. On (the default): from the training photo's look that best fits the
-  // left half — each training view's embeddings scored by the photometric loss on a copy of
-  // the test view at most kLookSearchPixels (trainer.hpp) across, one forward render each — so a photo far
+  // left half — each training view's embeddings scored by the photometric loss on a small
+  // downscaled copy of the test view, one forward render each (a look is a colour change over
+  // the whole frame, so a small copy ranks the looks as the full view does) — so a photo far
   // from the average look does not spend its 128 steps getting there. Off (--preset paper):
   // from the mean training look (docs/METHOD.md §10).
   bool test_start_from_best_look = true;
