@@ -1,6 +1,8 @@
 // Structure from motion for a folder of photos, by running the `colmap` 3.8 executable
-// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → mapper, then, when
-// fewer than kEscalateBelowShare of the photos are placed, the escalation steps below.
+// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → the capture evidence
+// (CaptureEvidence: the mapper's thresholds for a forward walk) → mapper, then, when fewer than
+// kEscalateBelowShare of the photos are placed, the escalation steps below (the two that match
+// again only while a photo left out lacks verified matches).
 //
 // Output layout (what the rest of desplat reads), under SfmOptions::out:
 //   images/          a symlink to the input folder (absolute target; the input may be
