@@ -239,10 +239,11 @@ bool Ladder::matching_can_help() {
     if (it == evidence.end() || lacks_matches(it->second)) ++lacking;
   }
   if (lacking > 0) return true;
-  stopped = "each of the " + std::to_string(lost) + " photo(s) not placed has verified matches with at least " +
-            std::to_string(kPlaceableMinPartners) + " photos (" + std::to_string(kPlaceableInliers) +
-            "+ inliers each): the mapper refused them, so matching again (guided matching, more features) "
-            "cannot help. Try ";
+  char counts[160];
+  std::snprintf(counts, sizeof counts, "each of the %d photo(s) not placed has verified matches with at least %d photos (%d+ inliers each)",
+                lost, kPlaceableMinPartners, kPlaceableInliers);
+  stopped = counts;
+  stopped += ": the mapper refused them, so matching again (guided matching, more features) cannot help. Try ";
   stopped += capture.forward
                  ? "photos a step apart that also move sideways or turn a little (walking straight ahead, the "
                    "points ahead are seen under tiny angles), or --camera-model SIMPLE_RADIAL (fewer lens "
