@@ -83,6 +83,20 @@ json sfm_json(const sfm::SfmResult& r) {
     skipped.push_back({{"file", f.path.generic_string()}, {"reason", f.reason}});
   for (const sfm::SkippedFile& f : r.unregistered)
     unregistered.push_back({{"photo", f.path.generic_string()}, {"reason", f.reason}});
+  const sfm::CaptureEvidence& e = r.capture;
+  const json capture = {{"read", e.read},
+                        {"verified_pairs", e.verified_pairs},
+                        {"median_partners", e.median_partners},
+                        {"max_inliers", e.max_inliers},
+                        {"poorly_matched_photos", e.poorly_matched_photos},
+                        {"strong_pairs", e.strong_pairs},
+                        {"forward_pairs", e.forward_pairs},
+                        {"default_start_pairs", e.default_start_pairs},
+                        {"median_forward_angle_deg", e.median_forward_angle_deg},
+                        {"median_neighbour_tri_angle_deg", e.median_neighbour_tri_angle_deg},
+                        {"sequential_photos", e.sequential_photos},
+                        {"forward", e.forward},
+                        {"summary", e.summary}};
   return {{"photos", r.num_photos},
           {"registered", r.num_registered},
           {"points", r.num_points},
@@ -92,7 +106,15 @@ json sfm_json(const sfm::SfmResult& r) {
           {"seconds", r.seconds},
           {"cameras", r.cameras.reason},
           {"matching", r.matcher_reason},
+          {"stage_seconds",
+           {{"extract", r.extract_seconds},
+            {"match", r.match_seconds},
+            {"evidence", r.evidence_seconds},
+            {"map", r.map_seconds}}},
+          {"capture", capture},
+          {"mapper", r.mapper_reason},
           {"attempts", attempts},
+          {"escalation_stopped", r.escalation_stopped},
           {"warning", r.warning},
           {"skipped_files", skipped},
           {"unregistered_photos", unregistered}};

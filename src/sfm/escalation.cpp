@@ -1,13 +1,19 @@
-// The escalation steps of a structure-from-motion run (see src/sfm/pipeline.hpp): colmap's
-// defaults first, then relaxed mapper thresholds, registering the photos left out, guided
-// matching and more features, each only while too few photos are placed.
+// The escalation steps of a structure-from-motion run (see src/sfm/pipeline.hpp): the first run
+// with the mapper thresholds the capture evidence chooses (colmap's defaults, or the forward-walk
+// thresholds), then relaxed mapper thresholds, registering the photos left out, guided matching
+// and more features, each only while too few photos are placed, and the two that match again
+// only while some photo left out lacks verified matches.
 #include <algorithm>
+#include <cstdio>
+#include <map>
+#include <set>
 #include <system_error>
 
 #include "desplat/core/stopwatch.hpp"
 #include "sfm/match_evidence.hpp"
 #include "sfm/pipeline.hpp"
 #include "sfm/quoting.hpp"
+#include "sfm/two_view_evidence.hpp"
 
 namespace desplat::sfm::pipeline {
 namespace fs = std::filesystem;
@@ -28,6 +34,32 @@ const std::vector<std::string> kRelaxedMapper = {"--Mapper.init_min_num_inliers"
                                                  "--Mapper.abs_pose_min_num_inliers", "15"};
 // Registering into a finished model uses the same per-photo threshold.
 const std::vector<std::string> kRelaxedRegistration = {"--Mapper.abs_pose_min_num_inliers", "15"};
+// A forward walk (is_forward_capture, include/desplat/sfm/sfm.hpp) from the first mapper run:
+//  - init_max_forward_motion 1.0: every pair of a walk moves along its viewing direction, and
+//    colmap's 0.95 refuses any such pair as the model's start;
+//  - init_min_tri_angle 2: a forward pair sees the points ahead under angles that shrink towards
+//    the direction of travel, a few degrees in the median, far below colmap's 16; 2° still fixes a
+//    point's depth to about 6 % at 1 px of error on a 500 px focal length;
+//  - tri_min_angle 0.5: colmap's 1.5° drops the points ahead of the camera, exactly the ones the
+//    next photo sees; bundle adjustment weighs what is kept by its reprojection error;
+//  - abs_pose_min_num_inliers 15: with fewer points per photo, 15 inliers still hold a 6-DoF pose
+//    (3 points determine one) five times over under RANSAC;
+//  - init_min_num_inliers 50: far above the 5–8 a two-view geometry needs, so a start pair
+//    that passes the angle tests is not refused for colmap's 100 alone.
+const std::vector<std::string> kForwardMapper = {"--Mapper.init_min_tri_angle",       "2",
+                                                 "--Mapper.init_max_forward_motion",  "1.0",
+                                                 "--Mapper.tri_min_angle",            "0.5",
+                                                 "--Mapper.abs_pose_min_num_inliers", "15",
+                                                 "--Mapper.init_min_num_inliers",     "50"};
+// The relaxed step of a forward walk: its thresholds with the relaxed step's 30 start inliers.
+const std::vector<std::string> kForwardRelaxedMapper = {"--Mapper.init_min_tri_angle",       "2",
+                                                        "--Mapper.init_max_forward_motion",  "1.0",
+                                                        "--Mapper.tri_min_angle",            "0.5",
+                                                        "--Mapper.abs_pose_min_num_inliers", "15",
+                                                        "--Mapper.init_min_num_inliers",     "30"};
+// Registering into a forward walk's model keeps its small-angle points too.
+const std::vector<std::string> kForwardRegistration = {"--Mapper.abs_pose_min_num_inliers", "15",
+                                                       "--Mapper.tri_min_angle", "0.5"};
 // Guided matching re-matches each verified pair along its epipolar geometry, recovering matches
 // the ratio test threw away; it costs about one more matching pass.
 const std::vector<std::string> kGuidedMatching = {"--SiftMatching.guided_matching", "1"};
@@ -74,7 +106,8 @@ Candidate run_mapper(Context& c, const SfmOptions& o, const Workspace& w, int mi
 // per-photo threshold), then bundle_adjuster refines the whole. Photos of colmap's smaller
 // sub-models join this way too: model_merger needs photos two models share, which sub-models
 // of one mapper run do not have.
-Candidate register_rest(Context& c, const SfmOptions& o, const Candidate& from, const fs::path& folder) {
+Candidate register_rest(Context& c, const SfmOptions& o, const Candidate& from, const fs::path& folder,
+                        const std::vector<std::string>& settings) {
   const Workspace w{from.where.database, folder / "sparse"};
   const fs::path model = w.sparse_root / "0";
   std::error_code ec;
@@ -82,7 +115,7 @@ Candidate register_rest(Context& c, const SfmOptions& o, const Candidate& from, 
   std::vector<std::string> reg = {
       "--database_path", w.database.string(),    "--input_path",         from.models[0].dir.string(), "--output_path",
       model.string(),    "--Mapper.num_threads", threads(o.num_threads), "--log_to_stderr",           "1"};
-  reg.insert(reg.end(), kRelaxedRegistration.begin(), kRelaxedRegistration.end());
+  reg.insert(reg.end(), settings.begin(), settings.end());
   const StageOutput r = run_stage(c, SfmStage::Map, "image_registrator", std::move(reg), c.num_photos);
   if (!r.exit.ok()) stage_failed(c, "image_registrator", r);
   const StageOutput ba = run_stage(
@@ -126,29 +159,100 @@ void Ladder::record(const std::string& step, const std::vector<std::string>& set
   if (better(cand, best)) best = cand;
 }
 
+void Ladder::read_capture_evidence() {
+  const Stopwatch clock;
+  try {
+    capture = summarize_capture(read_capture_geometry(c.layout.database));
+  } catch (const std::exception& e) {
+    capture = CaptureEvidence{};
+    capture.summary = std::string("not read (") + e.what() + ")";
+  }
+  evidence_seconds = clock.seconds();
+  char share[96];
+  std::snprintf(share, sizeof share, "%d of %d strong pairs move within 18 deg of the viewing direction",
+                capture.forward_pairs, capture.strong_pairs);
+  if (capture.forward)
+    mapper_reason = std::string("forward walk: ") + share +
+                    " (at least half), so colmap's defaults would refuse them as a start and drop the points "
+                    "ahead of the camera; the mapper allows forward motion (init_max_forward_motion 1.0) and small "
+                    "angles (init_min_tri_angle 2, tri_min_angle 0.5) and places a photo with 15 inliers, "
+                    "starting from 50";
+  else if (capture.read)
+    mapper_reason = std::string("colmap's defaults: ") + share + " (fewer than half: not a forward walk)";
+  else
+    mapper_reason = "colmap's defaults: the capture evidence could not be read";
+  c.log << "\n######## desplat_sfm: capture evidence (" << evidence_seconds << " s): " << capture.summary
+        << "\n######## desplat_sfm: mapper: " << mapper_reason << "\n"
+        << std::flush;
+}
+
 void Ladder::first_run(const std::string& camera_text) {
   const Stopwatch clock;
   const Workspace w{c.layout.database, c.layout.sparse_root};
   extract_seconds = run_extraction(c, o, w, single_camera, {}).seconds;
   match_seconds = run_matching(c, o, w, {}).seconds;
-  best = run_mapper(c, o, w, min_registered, {}, &last_map);
+  read_capture_evidence();
+  const std::vector<std::string> none;
+  const std::vector<std::string>& mapper = capture.forward ? kForwardMapper : none;
+  best = run_mapper(c, o, w, min_registered, mapper, &last_map);
   map_seconds = last_map.seconds;
-  attempts.push_back({"colmap defaults", camera_text + ", " + matcher_name(c.matcher) + " matching", best.registered(),
+  std::string settings = camera_text + ", " + matcher_name(c.matcher) + " matching";
+  if (capture.forward) settings += ", " + joined(kForwardMapper);
+  attempts.push_back({capture.forward ? "forward walk" : "colmap defaults", settings, best.registered(),
                       best.points(), clock.seconds()});
+}
+
+const std::vector<std::string>& Ladder::relaxed_mapper_settings() const {
+  return capture.forward ? kForwardRelaxedMapper : kRelaxedMapper;
 }
 
 void Ladder::relaxed_mapper() {
   const Stopwatch clock;
   const Workspace w{best.where.database, step_folder("relaxed-mapper") / "sparse"};
-  const Candidate cand = run_mapper(c, o, w, min_registered, kRelaxedMapper, &last_map);
-  record(kStepRelaxedMapper, kRelaxedMapper, cand, clock.seconds());
+  const Candidate cand = run_mapper(c, o, w, min_registered, relaxed_mapper_settings(), &last_map);
+  record(kStepRelaxedMapper, relaxed_mapper_settings(), cand, clock.seconds());
 }
 
 void Ladder::register_the_rest() {
   if (best.registered() == 0) return;
   const Stopwatch clock;
-  const Candidate cand = register_rest(c, o, best, step_folder("register-rest"));
-  record(kStepRegisterRest, kRelaxedRegistration, cand, clock.seconds());
+  const std::vector<std::string>& settings = capture.forward ? kForwardRegistration : kRelaxedRegistration;
+  const Candidate cand = register_rest(c, o, best, step_folder("register-rest"), settings);
+  record(kStepRegisterRest, settings, cand, clock.seconds());
+}
+
+bool Ladder::matching_can_help() {
+  std::map<std::string, MatchEvidence> evidence;
+  try {
+    evidence = read_match_evidence(best.where.database.empty() ? c.layout.database : best.where.database);
+  } catch (const std::exception&) {
+    return true;  // nothing known: the steps may help
+  }
+  const std::set<std::string> none;
+  const std::set<std::string>& placed = best.models.empty() ? none : best.models[0].image_names;
+  int lost = 0, lacking = 0;
+  for (const fs::path& p : photos) {
+    const std::string name = p.generic_string();
+    if (placed.count(name)) continue;
+    ++lost;
+    const auto it = evidence.find(name);
+    if (it == evidence.end() || lacks_matches(it->second)) ++lacking;
+  }
+  if (lacking > 0) return true;
+  char counts[160];
+  std::snprintf(counts, sizeof counts, "each of the %d photo(s) not placed has verified matches with at least %d photos (%d+ inliers each)",
+                lost, kPlaceableMinPartners, kPlaceableInliers);
+  stopped = counts;
+  stopped += ": the mapper refused them, so matching again (guided matching, more features) cannot help. Try ";
+  stopped += capture.forward
+                 ? "photos a step apart that also move sideways or turn a little (walking straight ahead, the "
+                   "points ahead are seen under tiny angles), or --camera-model SIMPLE_RADIAL (fewer lens "
+                   "parameters to calibrate)"
+                 : "--camera-model SIMPLE_RADIAL (fewer lens parameters to calibrate), photos a step apart with "
+                   "more overlap, or, for photos taken walking forward, colmap mapper by hand on " +
+                       in_quotes(c.layout.database) + " with " + joined(kForwardMapper);
+  c.log << "\n######## desplat_sfm: escalation stopped: " << stopped << "\n" << std::flush;
+  return false;
 }
 
 // Guided matching and the relaxed mapper, on a copy of the first run's features or, with
@@ -168,8 +272,9 @@ void Ladder::match_again(const char* step, const std::string& folder_name,
   }
   run_matching(c, o, w, kGuidedMatching);
   settings.insert(settings.end(), kGuidedMatching.begin(), kGuidedMatching.end());
-  settings.insert(settings.end(), kRelaxedMapper.begin(), kRelaxedMapper.end());
-  const Candidate cand = run_mapper(c, o, w, min_registered, kRelaxedMapper, &last_map);
+  const std::vector<std::string>& mapper = relaxed_mapper_settings();
+  settings.insert(settings.end(), mapper.begin(), mapper.end());
+  const Candidate cand = run_mapper(c, o, w, min_registered, mapper, &last_map);
   record(step, settings, cand, clock.seconds());
 }
 
@@ -188,6 +293,7 @@ void Ladder::run() {
                         &Ladder::register_the_rest, &Ladder::more_features,     &Ladder::register_the_rest};
   for (const Step step : steps) {
     if (enough()) return;
+    if ((step == &Ladder::guided_matching || step == &Ladder::more_features) && !matching_can_help()) return;
     const size_t before = attempts.size();
     try {
       (this->*step)();

@@ -145,7 +145,7 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, con
 
 void check_registered(const Context& c, const std::vector<ModelInfo>& models, const fs::path& database,
                       int min_registered, const std::vector<fs::path>& photos,
-                      const std::vector<SfmAttempt>& attempts) {
+                      const std::vector<SfmAttempt>& attempts, const std::string& stopped) {
   const ModelInfo& best = models[0];
   if (best.registered >= min_registered) return;
   SfmResult lost;
@@ -163,7 +163,8 @@ void check_registered(const Context& c, const std::vector<ModelInfo>& models, co
   fail(SfmErrorKind::TooFewRegistered,
        "only " + std::to_string(best.registered) + " of " + std::to_string(c.num_photos) +
            " photos could be placed (at least " + std::to_string(min_registered) + " needed); " + kPhotoAdvice + "." +
-           matcher_hint(c.matcher) + " Photos placed by each step: " + tried + ". The partial model is kept in " +
+           matcher_hint(c.matcher) + " Photos placed by each step: " + tried + "." +
+           (stopped.empty() ? "" : " The escalation stopped early: " + stopped) + " The partial model is kept in " +
            in_quotes(best.dir) + accept + ". Details: " + in_quotes(c.layout.log) + "\n" + names);
 }
 

@@ -112,9 +112,10 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models,
                                        const std::vector<std::filesystem::path>& photos,
                                        const std::filesystem::path& database);
 // TooFewRegistered (the model kept) unless models[0] holds at least `min_registered` photos.
+// `stopped`: why the escalation ended early (empty when it did not).
 void check_registered(const Context& c, const std::vector<ModelInfo>& models, const std::filesystem::path& database,
                       int min_registered, const std::vector<std::filesystem::path>& photos,
-                      const std::vector<SfmAttempt>& attempts);
+                      const std::vector<SfmAttempt>& attempts, const std::string& stopped);
 // Whether the mapper said it had no model to write (colmap exits 1 then).
 bool said_no_model(const StageOutput& s);
 // NoModel, with the mapper's last lines and advice for the photos and the matcher.
@@ -131,21 +132,30 @@ struct Candidate {
 };
 
 // The first run, then (run()) the escalation steps in order of cost until one places
-// kEscalateBelowShare of the photos; `best` is the model with the most photos.
+// kEscalateBelowShare of the photos; `best` is the model with the most photos. The first run
+// reads the capture evidence after matching and picks the mapper thresholds from it; the steps
+// that match again run only while some photo left out lacks verified matches.
 struct Ladder {
-  Ladder(Context& context, const SfmOptions& options, int min_registered_photos, bool single)
-      : c(context), o(options), min_registered(min_registered_photos), single_camera(single) {}
+  Ladder(Context& context, const SfmOptions& options, int min_registered_photos, bool single,
+         const std::vector<std::filesystem::path>& photo_list)
+      : c(context), o(options), min_registered(min_registered_photos), single_camera(single), photos(photo_list) {}
 
   Context& c;
   const SfmOptions& o;
   int min_registered;
   bool single_camera;
+  const std::vector<std::filesystem::path>& photos;  // as handed to colmap, relative to images/
   std::vector<SfmAttempt> attempts;
   Candidate best;
   StageOutput last_map;
   double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // of the first run
+  double evidence_seconds = 0;
+  CaptureEvidence capture;
+  std::string mapper_reason;  // which mapper thresholds the first run used, and why
+  std::string stopped;        // why the escalation ended before its last step, with what to try
 
-  // colmap's defaults: extraction, matching, mapping into <out>/database.db and <out>/sparse.
+  // Extraction, matching, the capture evidence, then the mapper with the thresholds it suits,
+  // into <out>/database.db and <out>/sparse.
   void first_run(const std::string& camera_text);
   // The escalation steps; a step that fails or runs past its time limit ends them, keeping the
   // models found so far.
@@ -155,6 +165,11 @@ struct Ladder {
   bool enough() const;
   std::filesystem::path step_folder(const std::string& name) const;
   void record(const std::string& step, const std::vector<std::string>& settings, const Candidate& cand, double seconds);
+  void read_capture_evidence();
+  // False (with `stopped` set) when every photo left out has verified matches enough to be
+  // placed: matching again cannot add what the mapper refused.
+  bool matching_can_help();
+  const std::vector<std::string>& relaxed_mapper_settings() const;
   void relaxed_mapper();
   void register_the_rest();
   void match_again(const char* step, const std::string& folder_name, const std::vector<std::string>* new_features);

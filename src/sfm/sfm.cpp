@@ -142,12 +142,15 @@ std::string describe_lost_photos(const SfmResult& r, size_t max_names) {
 
 std::string describe_attempts(const SfmResult& r) {
   std::string text = "cameras: " + r.cameras.reason + "\nmatching: " + r.matcher_reason + "\n";
+  if (!r.capture.summary.empty()) text += "capture: " + r.capture.summary + "\n";
+  if (!r.mapper_reason.empty()) text += "mapper: " + r.mapper_reason + "\n";
   for (const SfmAttempt& a : r.attempts) {
     char line[160];
     std::snprintf(line, sizeof line, "  %-18s %d of %d photos, %d points, %.0f s", (a.step + ":").c_str(), a.registered,
                   r.num_photos, a.points, a.seconds);
     text += line + std::string(" (") + a.settings + ")\n";
   }
+  if (!r.escalation_stopped.empty()) text += "escalation stopped: " + r.escalation_stopped + "\n";
   if (!r.warning.empty()) text += "warning: " + r.warning + "\n";
   return text;
 }
@@ -174,14 +177,15 @@ SfmResult run_sfm(const SfmOptions& o) {
         << "\n######## matching: " << matcher_reason << "\n"
         << std::flush;
 
-  Ladder ladder{c, o, min_registered, cameras.single};
+  Ladder ladder{c, o, min_registered, cameras.single, scan.photos};
   const std::string model = o.camera_model.empty() ? auto_camera_model(cameras.single) : o.camera_model;
   ladder.first_run((cameras.single ? "one shared camera, " : "one camera per photo, ") + model);
   if (o.escalate) ladder.run();
   if (ladder.best.registered() == 0) no_model(c, matcher, ladder.last_map);
   Candidate best = install_winner(c, ladder.best);
   renumber_models(best.models, c.layout.sparse_root);
-  check_registered(c, best.models, c.layout.database, min_registered, scan.photos, ladder.attempts);
+  check_registered(c, best.models, c.layout.database, min_registered, scan.photos, ladder.attempts,
+                   ladder.stopped);
 
   SfmResult r;
   r.images_dir = c.layout.images;
@@ -207,6 +211,10 @@ SfmResult run_sfm(const SfmOptions& o) {
   r.seconds = clock.seconds();
   r.extract_seconds = ladder.extract_seconds, r.match_seconds = ladder.match_seconds;
   r.map_seconds = ladder.map_seconds;
+  r.evidence_seconds = ladder.evidence_seconds;
+  r.capture = ladder.capture;
+  r.mapper_reason = ladder.mapper_reason;
+  r.escalation_stopped = ladder.stopped;
   return r;
 }
 

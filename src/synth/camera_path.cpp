@@ -45,6 +45,7 @@ ViewPose look_at(const Vector3d& center, const Vector3d& target) {
   pose.R_cw.row(1) = down.transpose();
   pose.R_cw.row(2) = forward.transpose();
   pose.center = center;
+  pose.target = target;
   pose.t_cw = -pose.R_cw * center;
   return pose;
 }
@@ -75,6 +76,30 @@ glm::dquat quaternion_of(const glm::dmat3& R) {
   return {(m(k, j) - m(j, k)) * f, xyz.x, xyz.y, xyz.z};
 }
 
+namespace {
+
+// View k of a walk: a straight line `radius` long through the point `height` above the target,
+// heading along azimuth start_deg, with a sideways sway (spread[0], three periods over the walk)
+// and a vertical bob (spread[1], a period of four frames: a photo every half stride) as a
+// hand-held camera has; the camera looks straight ahead, so consecutive views move along their
+// viewing direction.
+ViewPose walk_pose(const ViewsSpec& v, int k, uint64_t seed) {
+  const double deg = std::numbers::pi / 180;
+  const Vector3d heading(std::cos(v.start_deg * deg), std::sin(v.start_deg * deg), 0);
+  const Vector3d left(-heading.y(), heading.x(), 0);
+  const double s = v.count > 1 ? static_cast<double>(k) / (v.count - 1) : 0;
+  Vector3d c = Vector3d(v.target[0], v.target[1], v.target[2] + v.height) + (s - 0.5) * v.radius * heading +
+               v.spread[0] * std::sin(6 * std::numbers::pi * s) * left +
+               v.spread[1] * std::sin(0.5 * std::numbers::pi * k) * Vector3d::UnitZ();
+  if (v.position_jitter > 0) {
+    Rng rng(seed, Stream::Camera, static_cast<uint64_t>(k));
+    for (int a = 0; a < 3; ++a) c[a] += rng.uniform(-v.position_jitter, v.position_jitter);
+  }
+  return look_at(c, c + v.radius * heading);
+}
+
+}  // namespace
+
 std::vector<ViewPose> camera_path(const ViewsSpec& v, uint64_t seed) {
   const Vector3d target(v.target[0], v.target[1], v.target[2]);
   const double deg = std::numbers::pi / 180;
@@ -86,6 +111,10 @@ std::vector<ViewPose> camera_path(const ViewsSpec& v, uint64_t seed) {
   const ViewPose centre_pose = look_at(path_centre, target);
   for (int k = 0; k < n; ++k) {
     Vector3d c;
+    if (v.path == "walk") {
+      poses.push_back(walk_pose(v, k, seed));
+      continue;
+    }
     if (v.path == "orbit") {
       // A closed circle does not repeat its first camera; an open arc ends on its last.
       const double step = v.arc_deg >= 360 ? v.arc_deg / n : v.arc_deg / std::max(1, n - 1);

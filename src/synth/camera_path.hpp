@@ -1,5 +1,6 @@
 // Where the synthetic views are: the lens (a COLMAP camera) and one pose per view along an
-// orbit or a forward-facing spiral, every camera looking at ViewsSpec::target.
+// orbit or a forward-facing spiral, every camera looking at ViewsSpec::target, or along a walk,
+// every camera looking ahead in the direction of walking.
 // Frames as synth.hpp: world z up; poses world-to-camera in COLMAP's convention.
 #pragma once
 
@@ -17,6 +18,8 @@ struct ViewPose {
                            // y (down) and z (viewing direction) in world coordinates
   Eigen::Vector3d t_cw;    // world-to-camera translation: p_cam = R_cw·p + t_cw
   Eigen::Vector3d center;  // camera center in world coordinates
+  Eigen::Vector3d target;  // the point it looks at (orbit, forward: ViewsSpec::target; walk: the
+                           // point ViewsSpec::radius ahead), the distance distractors scale with
 };
 
 // PINHOLE (fx, fy, cx, cy) or OPENCV (… k1, k2, p1, p2) with id 1, fx = fy from the field of view.

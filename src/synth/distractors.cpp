@@ -38,9 +38,9 @@ Rgb vivid_color(Rng& rng) {
 }  // namespace
 
 std::vector<Primitive> make_distractors(const DistractorSpec& spec, const ViewPose& pose, const colmap::Camera& lens,
-                                        const Eigen::Vector3d& target, uint64_t seed, int view) {
+                                        uint64_t seed, int view) {
   Rng rng(seed, Stream::Distractors, static_cast<uint64_t>(view));
-  const double distance = (target - pose.center).norm();
+  const double distance = (pose.target - pose.center).norm();
   const PinholeIntrinsics K = pinhole_intrinsics(lens);
   const auto w = static_cast<double>(lens.width), h = static_cast<double>(lens.height);
   const int count = rng.integer(spec.per_view[0], spec.per_view[1]);

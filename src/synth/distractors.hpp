@@ -17,10 +17,10 @@ namespace desplat::synth {
 std::vector<bool> cluttered_views(int count, double clutter_ratio);
 
 // The distractor objects of view `view`: spec.per_view of them, each centred on a random pixel
-// of the central 70% of the image at a depth of spec.depth × the camera's distance to `target`,
+// of the central 70% of the image at a depth of spec.depth × the camera's distance to pose.target,
 // with a diameter of spec.size × the image height. World frame; deterministic in (seed, view):
 // two poses given the same `view` get the same objects at the same place in their frames.
 std::vector<Primitive> make_distractors(const DistractorSpec& spec, const ViewPose& pose, const colmap::Camera& lens,
-                                        const Eigen::Vector3d& target, uint64_t seed, int view);
+                                        uint64_t seed, int view);
 
 }  // namespace desplat::synth

@@ -98,7 +98,6 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
 
   const colmap::Camera lens = make_lens(d.camera);
   const std::vector<ViewPose> poses = camera_path(d.views, d.seed);
-  const Eigen::Vector3d target(d.views.target[0], d.views.target[1], d.views.target[2]);
   std::vector<Primitive> statics;
   for (const auto& object : d.world.objects) statics.push_back(make_primitive(object));
   StaticScene scene{Primitives(std::move(statics), d.world.light), d.world, d.sky};
@@ -112,7 +111,7 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
     if (train_index++ % d.distractors.track_length == 0) track_first = k;
     if (cluttered[static_cast<size_t>(k)])
       distractors[static_cast<size_t>(k)] =
-          Primitives(make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, target, d.seed, track_first),
+          Primitives(make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, d.seed, track_first),
                      d.world.light);
   }
 

@@ -187,7 +187,7 @@ void apply_views(ViewsSpec& w, const json& j, const std::string& prefix, const S
                {{"count", [&](const json& v, const std::string& k) { w.count = integer(v, k, s, 2, 9999); }},
                 {"path",
                  [&](const json& v, const std::string& k) {
-                   w.path = one_of(v, k, s, {"orbit", "forward"});
+                   w.path = one_of(v, k, s, {"orbit", "forward", "walk"});
                  }},
                 {"target", [&](const json& v, const std::string& k) { w.target = coords(v, k, s); }},
                 {"radius", [&](const json& v, const std::string& k) { w.radius = number(v, k, s, 1e-3, kBig); }},

@@ -1,6 +1,8 @@
 // Structure from motion for a folder of photos, by running the `colmap` 3.8 executable
-// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → mapper, then, when
-// fewer than kEscalateBelowShare of the photos are placed, the escalation steps below.
+// (CPU only): feature_extractor → exhaustive/sequential/spatial matcher → the capture evidence
+// (CaptureEvidence: the mapper's thresholds for a forward walk) → mapper, then, when fewer than
+// kEscalateBelowShare of the photos are placed, the escalation steps below (the two that match
+// again only while a photo left out lacks verified matches).
 //
 // Output layout (what the rest of desplat reads), under SfmOptions::out:
 //   images/          a symlink to the input folder (absolute target; the input may be
@@ -129,6 +131,55 @@ int required_registered(double share, int num_images);
 // below it carries a warning: a tenth of the photos lost is a tenth less model.
 inline constexpr double kEscalateBelowShare = 0.9;
 
+// ---- What the verified matches say about the capture ------------------------------------------
+//
+// After matching, run_sfm reads colmap's database (every geometrically verified pair: its inlier
+// matches and fundamental or essential matrix) and recovers each pair's relative motion
+// (src/sfm/two_view_evidence.hpp): how much of it is along the viewing direction and under
+// which angles the pair sees its points. colmap's default mapper starts a model only from a pair with at
+// least kColmapInitMinInliers inliers whose baseline lies more than acos(0.95) ≈ 18° off the
+// viewing direction and whose points are seen under kColmapInitMinTriAngleDeg; it keeps only
+// points seen under 1.5°. Walking forward (a street, a corridor, video from a car or a drone
+// flying ahead) moves every camera along its own viewing direction, so its well-matched pairs
+// fail that start test and the points ahead, near the direction of travel, are seen under tiny
+// angles: the matches are there and the mapper refuses them.
+
+// colmap 3.8's default mapper thresholds the rule is stated against.
+inline constexpr int kColmapInitMinInliers = 100;             // Mapper.init_min_num_inliers
+inline constexpr double kColmapInitMaxForwardMotion = 0.95;   // Mapper.init_max_forward_motion, |t_z| of the unit baseline
+inline constexpr double kColmapInitMinTriAngleDeg = 16;       // Mapper.init_min_tri_angle
+// A photo colmap can place needs this many 2D–3D inliers (Mapper.abs_pose_min_num_inliers), and
+// those come from its verified matches: a photo with fewer than kPlaceableMinPartners partners
+// holding that many inliers lacks matches; one with more was matched and the mapper refused it.
+inline constexpr int kPlaceableInliers = 30;
+inline constexpr int kPlaceableMinPartners = 2;
+// The forward-walk rule: a capture is a forward walk when at least this share of its strong
+// pairs (≥ kColmapInitMinInliers inliers, a relative pose recovered) move within 18° of the
+// viewing direction. Then most of the pairs colmap's defaults would start from and grow with are
+// the ones they refuse; in an orbit or a collection the share sits near 0 (sideways baselines).
+inline constexpr double kForwardPairShare = 0.5;
+
+struct CaptureEvidence {
+  bool read = false;        // false: the database could not be read for it (`summary` says why)
+  int photos = 0;           // photos in the database
+  int verified_pairs = 0;   // pairs with at least one inlier match
+  int strong_pairs = 0;     // ≥ kColmapInitMinInliers inliers and a relative pose recovered
+  int forward_pairs = 0;    // strong pairs whose baseline is within 18° of the viewing direction
+  int default_start_pairs = 0;  // strong pairs colmap's defaults may start from (not forward, ≥ 16°)
+  double median_partners = 0;   // verified partners per photo (median over photos)
+  int max_inliers = 0;          // the largest inlier count of any pair
+  double median_forward_angle_deg = 0;   // angle between baseline and viewing direction, median over strong pairs
+  double median_neighbour_tri_angle_deg = 0;  // per photo: the median triangulation angle of its
+                                              // strongest pair; median over photos
+  int sequential_photos = 0;      // photos whose strongest partner is at most 2 names away
+  int poorly_matched_photos = 0;  // fewer than kPlaceableMinPartners partners with kPlaceableInliers
+  bool forward = false;           // is_forward_capture
+  std::string summary;            // one line for the log and metrics.json
+};
+
+// The rule above: read, strong_pairs > 0 and forward_pairs ≥ kForwardPairShare · strong_pairs.
+bool is_forward_capture(const CaptureEvidence& evidence);
+
 // How photos are given cameras (intrinsics). Auto: one shared camera when every photo has the
 // same size and the same EXIF make, model and focal length (or none of them), one per photo
 // otherwise (choose_cameras).
@@ -244,6 +295,12 @@ struct SfmResult {
   int num_models = 0;                  // models mapper wrote
   double seconds = 0;                  // wall time of the whole run
   double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // wall time of each stage
+  double evidence_seconds = 0;  // reading the capture evidence from the database
+  CaptureEvidence capture;      // what the verified matches say (read after matching)
+  std::string mapper_reason;    // which mapper thresholds the first run used, and why
+  // Non-empty when the escalation stopped before its last step because the evidence says the
+  // remaining steps cannot help: why, and what to try instead.
+  std::string escalation_stopped;
 };
 
 // What a run left out, for a person: one line per skipped file with its reason and the names of

@@ -1,5 +1,6 @@
 // Synthetic scenes with known ground truth: a textured static world of planes, boxes
-// and spheres, photographed along an orbit or a forward-facing path, written in the layout a
+// and spheres, photographed along an orbit, a forward-facing path or a forward walk (cameras
+// looking ahead as they move, as a street walk is photographed), written in the layout a
 // user brings (images/ + a binary COLMAP sparse/0) plus what no real capture has: the clean
 // image of every view and the distractor mask of every training view.
 //
@@ -90,14 +91,17 @@ struct CameraSpec {
 
 struct ViewsSpec {
   int count = 8;                           // all views; every 8th (k % 8 == 0) is a test view
-  std::string path = "orbit";              // "orbit" or "forward"
-  Vec3d target{0, 0, 0.3};                 // every camera looks at this point
+  std::string path = "orbit";              // "orbit", "forward" or "walk"
+  Vec3d target{0, 0, 0.3};                 // orbit, forward: every camera looks at this point; walk: the
+                                           // ground point below the middle of the walk
   double radius = 4;                       // orbit: horizontal distance to the target's axis; forward:
-                                           // distance from the path's centre to the target
+                                           // distance from the path's centre to the target; walk: its length
   double height = 2.5;                     // camera height above the target (world z)
   double arc_deg = 360;                    // orbit: the arc the cameras span (360: a closed circle)
-  double start_deg = 0;                    // azimuth of the first camera (orbit) or of the path (forward)
-  std::array<double, 2> spread{1.0, 0.5};  // forward: half-extents of the camera path (spiral)
+  double start_deg = 0;                    // azimuth of the first camera (orbit), of the path (forward) or of
+                                           // the direction of walking (walk)
+  std::array<double, 2> spread{1.0, 0.5};  // forward: half-extents of the camera path (spiral); walk: the
+                                           // amplitudes of its sideways sway and vertical bob
   double position_jitter = 0;              // uniform random offset of each camera centre [world units]
   friend bool operator==(const ViewsSpec&, const ViewsSpec&) = default;
 };
@@ -132,8 +136,8 @@ struct DistractorSpec {                    // per-view objects in front of the s
                                            // spread evenly over the training views in name order
   std::array<int, 2> per_view{1, 3};       // min, max objects in a cluttered view
   std::array<double, 2> size{0.15, 0.35};  // object diameter as a fraction of the image height
-  std::array<double, 2> depth{0.3, 0.55};  // distance from the camera as a fraction of its
-                                           // distance to views.target
+  std::array<double, 2> depth{0.3, 0.55};  // distance from the camera as a fraction of its distance
+                                           // to the point it looks at (walk: views.radius ahead)
   int track_length = 1;                    // runs of this many consecutive training views show the same objects at
                                            // the same place in the frame (they move with the camera, as a hand or a
                                            // strap would), which no single 3D position explains; 1 = independent views
