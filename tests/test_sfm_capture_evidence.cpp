@@ -74,9 +74,15 @@ std::vector<Vector3d> street_points(int n, unsigned seed) {
   std::vector<Vector3d> pts;
   for (int i = 0; i < n; ++i) {
     switch (i % 3) {
-      case 0: pts.emplace_back(along(rng), 3, up(rng)); break;
-      case 1: pts.emplace_back(along(rng), -3, up(rng)); break;
-      default: pts.emplace_back(along(rng), across(rng), 0); break;
+      case 0:
+        pts.emplace_back(along(rng), 3, up(rng));
+        break;
+      case 1:
+        pts.emplace_back(along(rng), -3, up(rng));
+        break;
+      default:
+        pts.emplace_back(along(rng), across(rng), 0);
+        break;
     }
   }
   return pts;
@@ -151,8 +157,8 @@ void write_database(const fs::path& path, const std::vector<Pose>& poses, const 
     ASSERT_EQ(sqlite3_step(stmt), SQLITE_DONE) << sqlite3_errmsg(db);
     sqlite3_finalize(stmt);
   };
-  run("INSERT INTO cameras VALUES (1, 1, 640, 480, ?1, 0)", {{1, blob_of(std::vector<double>{kFocal, kFocal, kCx, kCy})}},
-      {});
+  run("INSERT INTO cameras VALUES (1, 1, 640, 480, ?1, 0)",
+      {{1, blob_of(std::vector<double>{kFocal, kFocal, kCx, kCy})}}, {});
   Matrix3d K;
   K << kFocal, 0, kCx, 0, kFocal, kCy, 0, 0, 1;
   // visible[k][i]: the keypoint index of point i in photo k, or -1.
@@ -168,8 +174,7 @@ void write_database(const fs::path& path, const std::vector<Pose>& poses, const 
       kp.insert(kp.end(), {float(x), float(y), 1, 0, 0, 1});
     }
     const std::string name = photo_name(static_cast<int>(k));
-    ASSERT_EQ(sqlite3_exec(db,
-                           ("INSERT INTO images VALUES (" + std::to_string(k + 1) + ", '" + name + "', 1)").c_str(),
+    ASSERT_EQ(sqlite3_exec(db, ("INSERT INTO images VALUES (" + std::to_string(k + 1) + ", '" + name + "', 1)").c_str(),
                            nullptr, nullptr, nullptr),
               SQLITE_OK);
     run("INSERT INTO keypoints VALUES (?2, ?3, 6, ?1)", {{1, blob_of(kp)}},
@@ -179,7 +184,8 @@ void write_database(const fs::path& path, const std::vector<Pose>& poses, const 
     for (size_t b = a + 1; b < poses.size(); ++b) {
       std::vector<uint32_t> m;
       for (size_t i = 0; i < world.size(); ++i)
-        if (visible[a][i] >= 0 && visible[b][i] >= 0) m.insert(m.end(), {uint32_t(visible[a][i]), uint32_t(visible[b][i])});
+        if (visible[a][i] >= 0 && visible[b][i] >= 0)
+          m.insert(m.end(), {uint32_t(visible[a][i]), uint32_t(visible[b][i])});
       if (static_cast<int>(m.size() / 2) < min_shared) continue;
       const auto [R, t] = relative(poses[a], poses[b]);
       const Matrix3d E = cross_matrix(t) * R, F = K.inverse().transpose() * E * K.inverse();
@@ -252,7 +258,7 @@ TEST(CaptureEvidence, AnOrbitIsNotAForwardWalk) {
   const sfm::CaptureEvidence e = sfm::summarize_capture(sfm::read_capture_geometry(db));
   EXPECT_TRUE(e.read);
   EXPECT_GT(e.strong_pairs, 10);
-  EXPECT_EQ(e.forward_pairs, 0);  // the baselines of an arc are across the view
+  EXPECT_EQ(e.forward_pairs, 0);        // the baselines of an arc are across the view
   EXPECT_GT(e.default_start_pairs, 0);  // photos 2+ steps apart meet at 25°+
   EXPECT_GT(e.median_forward_angle_deg, 45);
   EXPECT_FALSE(e.forward);
@@ -303,9 +309,9 @@ TEST_F(FakeColmap, AForwardWalkIsMappedWithForwardThresholdsFromTheFirstRun) {
   EXPECT_CONTAINS(r.mapper_reason, "forward walk: 15 of 15 strong pairs");
   const std::string args = slurp(args_log_);
   const std::string mapper = args.substr(args.find("\nmapper "));
-  for (const char* option : {"--Mapper.init_min_tri_angle 2", "--Mapper.init_max_forward_motion 1.0",
-                             "--Mapper.tri_min_angle 0.5", "--Mapper.abs_pose_min_num_inliers 15",
-                             "--Mapper.init_min_num_inliers 50"})
+  for (const char* option :
+       {"--Mapper.init_min_tri_angle 2", "--Mapper.init_max_forward_motion 1.0", "--Mapper.tri_min_angle 0.5",
+        "--Mapper.abs_pose_min_num_inliers 15", "--Mapper.init_min_num_inliers 50"})
     EXPECT_CONTAINS(mapper, option);
   const std::string log = slurp(r.log);
   EXPECT_CONTAINS(log, "capture evidence");

@@ -50,7 +50,8 @@ TEST(SfmStreetWalk, AForwardWalkGetsTheForwardThresholdsFromTheFirstRunAndIsNeve
   (void)::nice(10);  // colmap inherits it: a shared machine's other work keeps moving
   TempDir tmp("street_walk");
   const fs::path scene = tmp.path() / "scene";
-  const synth::Description d = synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/street_walk.json");
+  const synth::Description d =
+      synth::load_description(fs::path(DESPLAT_SOURCE_DIR) / "data/synthetic/street_walk.json");
   ASSERT_GE(d.camera.width, 640);
   ASSERT_GE(d.camera.height, 480);
   ASSERT_GE(d.views.count, 30);

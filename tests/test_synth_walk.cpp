@@ -53,8 +53,8 @@ TEST(SynthWalk, CamerasWalkStraightAheadLookingAlongTheWalk) {
 }
 
 TEST(SynthWalk, TheStreetWalkIsAForwardWalkOfThirtyOrMoreViewsAtLeast640By480) {
-  const synth::Description d = synth::load_description(std::filesystem::path(DESPLAT_SOURCE_DIR) /
-                                                       "data/synthetic/street_walk.json");
+  const synth::Description d =
+      synth::load_description(std::filesystem::path(DESPLAT_SOURCE_DIR) / "data/synthetic/street_walk.json");
   EXPECT_EQ(d.views.path, "walk");
   EXPECT_GE(d.views.count, 30);
   EXPECT_GE(d.camera.width, 640);

@@ -46,17 +46,15 @@ const std::vector<std::string> kRelaxedRegistration = {"--Mapper.abs_pose_min_nu
 //    (3 points determine one) five times over under RANSAC;
 //  - init_min_num_inliers 50: far above the 5–8 a two-view geometry needs, so a start pair
 //    that passes the angle tests is not refused for colmap's 100 alone.
-const std::vector<std::string> kForwardMapper = {"--Mapper.init_min_tri_angle",       "2",
-                                                 "--Mapper.init_max_forward_motion",  "1.0",
-                                                 "--Mapper.tri_min_angle",            "0.5",
-                                                 "--Mapper.abs_pose_min_num_inliers", "15",
-                                                 "--Mapper.init_min_num_inliers",     "50"};
+const std::vector<std::string> kForwardMapper = {
+    "--Mapper.init_min_tri_angle",   "2",   "--Mapper.init_max_forward_motion",  "1.0",
+    "--Mapper.tri_min_angle",        "0.5", "--Mapper.abs_pose_min_num_inliers", "15",
+    "--Mapper.init_min_num_inliers", "50"};
 // The relaxed step of a forward walk: its thresholds with the relaxed step's 30 start inliers.
-const std::vector<std::string> kForwardRelaxedMapper = {"--Mapper.init_min_tri_angle",       "2",
-                                                        "--Mapper.init_max_forward_motion",  "1.0",
-                                                        "--Mapper.tri_min_angle",            "0.5",
-                                                        "--Mapper.abs_pose_min_num_inliers", "15",
-                                                        "--Mapper.init_min_num_inliers",     "30"};
+const std::vector<std::string> kForwardRelaxedMapper = {
+    "--Mapper.init_min_tri_angle",   "2",   "--Mapper.init_max_forward_motion",  "1.0",
+    "--Mapper.tri_min_angle",        "0.5", "--Mapper.abs_pose_min_num_inliers", "15",
+    "--Mapper.init_min_num_inliers", "30"};
 // Registering into a forward walk's model keeps its small-angle points too.
 const std::vector<std::string> kForwardRegistration = {"--Mapper.abs_pose_min_num_inliers", "15",
                                                        "--Mapper.tri_min_angle", "0.5"};
@@ -198,8 +196,8 @@ void Ladder::first_run(const std::string& camera_text) {
   map_seconds = last_map.seconds;
   std::string settings = camera_text + ", " + matcher_name(c.matcher) + " matching";
   if (capture.forward) settings += ", " + joined(kForwardMapper);
-  attempts.push_back({capture.forward ? "forward walk" : "colmap defaults", settings, best.registered(),
-                      best.points(), clock.seconds()});
+  attempts.push_back({capture.forward ? "forward walk" : "colmap defaults", settings, best.registered(), best.points(),
+                      clock.seconds()});
 }
 
 const std::vector<std::string>& Ladder::relaxed_mapper_settings() const {
@@ -240,7 +238,8 @@ bool Ladder::matching_can_help() {
   }
   if (lacking > 0) return true;
   char counts[160];
-  std::snprintf(counts, sizeof counts, "each of the %d photo(s) not placed has verified matches with at least %d photos (%d+ inliers each)",
+  std::snprintf(counts, sizeof counts,
+                "each of the %d photo(s) not placed has verified matches with at least %d photos (%d+ inliers each)",
                 lost, kPlaceableMinPartners, kPlaceableInliers);
   stopped = counts;
   stopped += ": the mapper refused them, so matching again (guided matching, more features) cannot help. Try ";

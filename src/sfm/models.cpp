@@ -144,8 +144,8 @@ std::vector<SkippedFile> photos_not_in(const std::vector<ModelInfo>& models, con
 }
 
 void check_registered(const Context& c, const std::vector<ModelInfo>& models, const fs::path& database,
-                      int min_registered, const std::vector<fs::path>& photos,
-                      const std::vector<SfmAttempt>& attempts, const std::string& stopped) {
+                      int min_registered, const std::vector<fs::path>& photos, const std::vector<SfmAttempt>& attempts,
+                      const std::string& stopped) {
   const ModelInfo& best = models[0];
   if (best.registered >= min_registered) return;
   SfmResult lost;

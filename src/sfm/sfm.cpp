@@ -184,8 +184,7 @@ SfmResult run_sfm(const SfmOptions& o) {
   if (ladder.best.registered() == 0) no_model(c, matcher, ladder.last_map);
   Candidate best = install_winner(c, ladder.best);
   renumber_models(best.models, c.layout.sparse_root);
-  check_registered(c, best.models, c.layout.database, min_registered, scan.photos, ladder.attempts,
-                   ladder.stopped);
+  check_registered(c, best.models, c.layout.database, min_registered, scan.photos, ladder.attempts, ladder.stopped);
 
   SfmResult r;
   r.images_dir = c.layout.images;

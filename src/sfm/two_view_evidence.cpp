@@ -114,7 +114,8 @@ std::optional<RelativeMotion> motion_from_essential(const Eigen::Matrix3d& E, co
   W << 0, -1, 0, 1, 0, 0, 0, 0, 1;
   const Eigen::Vector3d t = U.col(2).normalized();
   std::optional<Candidate> best;
-  for (const Eigen::Matrix3d& R : {Eigen::Matrix3d(U * W * V.transpose()), Eigen::Matrix3d(U * W.transpose() * V.transpose())})
+  for (const Eigen::Matrix3d& R :
+       {Eigen::Matrix3d(U * W * V.transpose()), Eigen::Matrix3d(U * W.transpose() * V.transpose())})
     for (const Eigen::Vector3d& tt : {t, Eigen::Vector3d(-t)}) {
       Candidate c = evaluate(R, tt, x1, x2);
       if (!best || c.angles_deg.size() > best->angles_deg.size()) best = std::move(c);

@@ -24,7 +24,7 @@ namespace desplat::sfm {
 struct RelativeMotion {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t = Eigen::Vector3d::UnitZ();  // unit length
-  int points_in_front = 0;                        // inliers triangulated in front of both cameras
+  int points_in_front = 0;                       // inliers triangulated in front of both cameras
   // |t_z|: the cosine of the angle between the baseline and camera 2's viewing direction, the
   // quantity colmap's Mapper.init_max_forward_motion bounds.
   double forward = 0;

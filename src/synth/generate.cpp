@@ -110,9 +110,8 @@ GenerationReport generate_scene(const Description& d, const GenerateOptions& o) 
     if (is_test_view(k)) continue;
     if (train_index++ % d.distractors.track_length == 0) track_first = k;
     if (cluttered[static_cast<size_t>(k)])
-      distractors[static_cast<size_t>(k)] =
-          Primitives(make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, d.seed, track_first),
-                     d.world.light);
+      distractors[static_cast<size_t>(k)] = Primitives(
+          make_distractors(d.distractors, poses[static_cast<size_t>(k)], lens, d.seed, track_first), d.world.light);
   }
 
   GenerationReport report;

@@ -145,9 +145,10 @@ inline constexpr double kEscalateBelowShare = 0.9;
 // angles: the matches are there and the mapper refuses them.
 
 // colmap 3.8's default mapper thresholds the rule is stated against.
-inline constexpr int kColmapInitMinInliers = 100;             // Mapper.init_min_num_inliers
-inline constexpr double kColmapInitMaxForwardMotion = 0.95;   // Mapper.init_max_forward_motion, |t_z| of the unit baseline
-inline constexpr double kColmapInitMinTriAngleDeg = 16;       // Mapper.init_min_tri_angle
+inline constexpr int kColmapInitMinInliers = 100;  // Mapper.init_min_num_inliers
+inline constexpr double kColmapInitMaxForwardMotion =
+    0.95;                                                // Mapper.init_max_forward_motion, |t_z| of the unit baseline
+inline constexpr double kColmapInitMinTriAngleDeg = 16;  // Mapper.init_min_tri_angle
 // A photo colmap can place needs this many 2D–3D inliers (Mapper.abs_pose_min_num_inliers), and
 // those come from its verified matches: a photo with fewer than kPlaceableMinPartners partners
 // holding that many inliers lacks matches; one with more was matched and the mapper refused it.
@@ -160,21 +161,21 @@ inline constexpr int kPlaceableMinPartners = 2;
 inline constexpr double kForwardPairShare = 0.5;
 
 struct CaptureEvidence {
-  bool read = false;        // false: the database could not be read for it (`summary` says why)
-  int photos = 0;           // photos in the database
-  int verified_pairs = 0;   // pairs with at least one inlier match
-  int strong_pairs = 0;     // ≥ kColmapInitMinInliers inliers and a relative pose recovered
-  int forward_pairs = 0;    // strong pairs whose baseline is within 18° of the viewing direction
-  int default_start_pairs = 0;  // strong pairs colmap's defaults may start from (not forward, ≥ 16°)
-  double median_partners = 0;   // verified partners per photo (median over photos)
-  int max_inliers = 0;          // the largest inlier count of any pair
-  double median_forward_angle_deg = 0;   // angle between baseline and viewing direction, median over strong pairs
+  bool read = false;                          // false: the database could not be read for it (`summary` says why)
+  int photos = 0;                             // photos in the database
+  int verified_pairs = 0;                     // pairs with at least one inlier match
+  int strong_pairs = 0;                       // ≥ kColmapInitMinInliers inliers and a relative pose recovered
+  int forward_pairs = 0;                      // strong pairs whose baseline is within 18° of the viewing direction
+  int default_start_pairs = 0;                // strong pairs colmap's defaults may start from (not forward, ≥ 16°)
+  double median_partners = 0;                 // verified partners per photo (median over photos)
+  int max_inliers = 0;                        // the largest inlier count of any pair
+  double median_forward_angle_deg = 0;        // angle between baseline and viewing direction, median over strong pairs
   double median_neighbour_tri_angle_deg = 0;  // per photo: the median triangulation angle of its
                                               // strongest pair; median over photos
-  int sequential_photos = 0;      // photos whose strongest partner is at most 2 names away
-  int poorly_matched_photos = 0;  // fewer than kPlaceableMinPartners partners with kPlaceableInliers
-  bool forward = false;           // is_forward_capture
-  std::string summary;            // one line for the log and metrics.json
+  int sequential_photos = 0;                  // photos whose strongest partner is at most 2 names away
+  int poorly_matched_photos = 0;              // fewer than kPlaceableMinPartners partners with kPlaceableInliers
+  bool forward = false;                       // is_forward_capture
+  std::string summary;                        // one line for the log and metrics.json
 };
 
 // The rule above: read, strong_pairs > 0 and forward_pairs ≥ kForwardPairShare · strong_pairs.
@@ -295,9 +296,9 @@ struct SfmResult {
   int num_models = 0;                  // models mapper wrote
   double seconds = 0;                  // wall time of the whole run
   double extract_seconds = 0, match_seconds = 0, map_seconds = 0;  // wall time of each stage
-  double evidence_seconds = 0;  // reading the capture evidence from the database
-  CaptureEvidence capture;      // what the verified matches say (read after matching)
-  std::string mapper_reason;    // which mapper thresholds the first run used, and why
+  double evidence_seconds = 0;                                     // reading the capture evidence from the database
+  CaptureEvidence capture;    // what the verified matches say (read after matching)
+  std::string mapper_reason;  // which mapper thresholds the first run used, and why
   // Non-empty when the escalation stopped before its last step because the evidence says the
   // remaining steps cannot help: why, and what to try instead.
   std::string escalation_stopped;
