@@ -15,7 +15,6 @@ trap 'rm -rf "$tmp"' EXIT
 ranks2() { "$mpiexec" -np 2 --oversubscribe "$train" "$@"; }
 
 "$build/apps/desplat_synth" --scene "$source/data/synthetic/tiny_distractors.json" --out "$tmp/scene" -q > /dev/null
-tiny=(--data "$tmp/scene" --iterations 300 --threads 1 --checkpoint-every 0 --effects distractors)
 # Long enough for static and distractor refinements, seeding and an SH degree step (--preset fast).
 tiny_long=(--data "$tmp/scene" --preset fast --iterations 1200 --threads 1 --checkpoint-every 0 --effects distractors)
 
