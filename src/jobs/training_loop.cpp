@@ -8,6 +8,7 @@
 
 #include "desplat/core/stopwatch.hpp"
 #include "desplat/eval/mask_metrics.hpp"
+#include "desplat/jobs/training_eta.hpp"
 #include "jobs/text_format.hpp"
 #include "jobs/training_steps.hpp"
 
@@ -27,18 +28,19 @@ bool reaches_multiple(int64_t before, int64_t after, int64_t every) { return aft
 class Progress {
  public:
   Progress(int64_t total, int log_every) : total_(total), log_every_(log_every), tty_(isatty(fileno(stdout))) {}
-  void update(const StepStats& s, double elapsed, int64_t done_this_run) {
+  // `eta`: seconds left (TrainingEta), negative while unknown.
+  void update(const StepStats& s, double elapsed, int64_t done_this_run, double eta) {
     const int64_t step = s.step + s.views;
     const bool due = tty_ ? (Clock::now() - last_ > std::chrono::milliseconds(200) || step == total_)
                           : (reaches_multiple(s.step, step, std::max(1, log_every_)) || step == total_);
     if (!due) return;
     last_ = Clock::now();
     const double rate = done_this_run / std::max(elapsed, 1e-9);
-    const double eta = (total_ - step) / std::max(rate, 1e-9);
+    const std::string left = eta < 0 ? "--" : format_duration(eta, DurationStyle::compact);
     char line[256];
     std::snprintf(line, sizeof line, "%6lld/%lld %3d%% ETA %s  loss %.4f  psnr %.2f  %zu Gaussians  %.2f it/s",
-                  (long long)step, (long long)total_, int(100 * step / total_),
-                  format_duration(eta, DurationStyle::compact).c_str(), s.loss, s.psnr, s.gaussians, rate);
+                  (long long)step, (long long)total_, int(100 * step / total_), left.c_str(), s.loss, s.psnr,
+                  s.gaussians, rate);
     if (tty_) {
       const int width = 20, filled = int(width * step / total_);
       std::printf("\r[%s%s] %s\033[K", std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(),
@@ -101,6 +103,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
   Progress progress(config.iterations, opt.log_every);
   const Stopwatch run_clock;
   const int64_t first = trainer.current_step();
+  TrainingEta eta(config, first, config.iterations);
   // The training curve for report.html: mean loss and PSNR over each interval, about 200 points.
   const int64_t curve_every = std::max<int64_t>(1, config.iterations / 200);
   double curve_loss = 0, curve_psnr = 0;
@@ -135,7 +138,8 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
     r.comm_bytes.push_back(double(s.comm_bytes)), r.comm_seconds.push_back(s.comm_seconds);
     r.step_seconds.push_back(s.timings.total());
     const double elapsed = run_clock.seconds();
-    progress.update(s, elapsed, trainer.current_step() - first);
+    eta.observe(trainer, trainer.current_step(), elapsed);
+    progress.update(s, elapsed, trainer.current_step() - first, eta.remaining(trainer.current_step()));
     const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
     interval_bytes += s.comm_bytes, interval_comm_seconds += s.comm_seconds;
@@ -174,6 +178,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
       save();
   }
   r.wall_seconds = run_clock.seconds();
+  r.eta_accuracy = eta.accuracy(r.wall_seconds);
   return r;
 }
 

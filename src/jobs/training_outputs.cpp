@@ -154,6 +154,7 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
   if (!inputs.sfm_summary.is_null()) metrics["sfm"] = inputs.sfm_summary;
   metrics["history"] = record.history;
   metrics["wall_seconds_this_run"] = record.wall_seconds;
+  metrics["eta_accuracy"] = record.eta_accuracy;
   metrics["peak_memory_mb"] = peak_mb[0];
   metrics["ranks"] = {{"count", trainer.ranks()},
                       {"communicator", trainer.communicator() ? trainer.communicator()->kind() : "single process"},

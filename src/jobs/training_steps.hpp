@@ -44,8 +44,9 @@ struct TrainingRecord {
   std::vector<double> pairs, ns_forward, ns_forward_backward, visible_share;
   // Every step: this rank's collectives (bytes, seconds; zero in one process) and the step's time.
   std::vector<double> comm_bytes, comm_seconds, step_seconds;
-  double wall_seconds = 0;   // this process's training, without the final evaluation
-  bool interrupted = false;  // stopped by stop_requested (checkpoint written)
+  double wall_seconds = 0;                                // this process's training, without the final evaluation
+  nlohmann::json eta_accuracy = nlohmann::json::array();  // TrainingEta::accuracy
+  bool interrupted = false;                               // stopped by stop_requested (checkpoint written)
 };
 // Trains `trainer` to config.iterations with progress output, periodic evaluation and
 // checkpoints (`save` writes one).

@@ -284,12 +284,17 @@ void backward_tile_walk(const TileGrid& grid, int tile, const RasterOutput& fw, 
     const float a = sp.conic[0], b = sp.conic[1], c = sp.conic[2];
     const float o = sp.opacity, z = sp.depth;
     const float cr = sp.rgb[0], cg = sp.rgb[1], cb = sp.rgb[2];
-    // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
-    // and the lanes are summed in a fixed order afterwards (deterministic).
-    alignas(64) float acc[kEntrySlots][S] = {};
     int r0, r1, h0, h1;
     box_rows_in_tile(my, sp.ry, y0, rows, r0, r1);
     box_halves_in_tile(mx, sp.rx, x0, cols, h0, h1);
+    // Per-column partial sums, one lane per pixel column: elementwise updates vectorize,
+    // and the lanes are summed in a fixed order afterwards (deterministic). Only the columns
+    // the spans below write and sum_columns reads start at +0: the box's halves [h0, h1]
+    // (h0 ≤ h1: the forward marked an entry without halves blank), or every column when a
+    // span is a whole row.
+    alignas(64) float acc[kEntrySlots][S];
+    for (int q = 0; q < kEntrySlots; ++q)
+      for_each_span(h0, h1, [&](auto width, int first) { std::fill_n(&acc[q][first], decltype(width)::value, 0.0f); });
     const RowChords chords(sp.chord, mx, x0, h0, h1);
     alignas(64) int32_t row_h0[S], row_h1[S];
     chords.row_halves(my, y0, row_h0, row_h1);

@@ -1,0 +1,99 @@
+// The training time left, as the progress line shows it (docs/OUTPUTS.md, "Progress").
+//
+// The model: a training view's time is a part that does not depend on the schedule (density
+// control, bookkeeping) plus the static layer's render, forward and backward, which depends
+// on the resolution and the SH degree the schedule sets (Phase). The rate measured over the
+// last views of the current phase stands for the rest of it; a coming phase costs that rate
+// plus the difference of one timed forward + backward render of a training view in the two
+// phases, with the current Gaussians. The renders are timed again when the phase changes or
+// the Gaussian count has moved by a fifth, so growth the run has shown is in the estimate;
+// growth still to come is not, nor Adam's share of the higher SH bands (BENCHMARKS.md,
+// "Speed", how far off that leaves it).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "desplat/train/train_config.hpp"
+#include "desplat/train/trainer.hpp"
+
+namespace desplat {
+
+// A stretch of the schedule with one resolution factor (TrainConfig::downscale_at) and one SH
+// degree (sh_degree_at): the views of a phase cost alike, up to the Gaussians' growth.
+struct Phase {
+  int factor = 0, sh_degree = -1;
+  bool operator==(const Phase&) const = default;
+  auto operator<=>(const Phase&) const = default;
+};
+Phase phase_at(const TrainConfig& schedule, int64_t view);
+// The first view after `view` (< total) in another phase, or `total`.
+int64_t phase_end(const TrainConfig& schedule, int64_t view, int64_t total);
+
+// Seconds for the training views [done, total) when a view of phase p costs
+// rate + render_seconds[p] − render_seconds[phase_at(done)] (render_seconds holds every
+// phase the views reach). Pure.
+double predict_remaining_seconds(const TrainConfig& schedule, int64_t done, int64_t total, double rate,
+                                 const std::map<Phase, double>& render_seconds);
+
+// Seconds one static render takes, forward and backward, of `g` seen by `camera`: the time
+// it takes to answer, which TrainingEta leaves out of its rates.
+using RenderTimer = std::function<double(const GaussianView& g, const Camera& camera, const RasterSettings& rs)>;
+// The real one: rasterize_forward + rasterize_backward, timed by the wall clock (its buffers
+// are its own and kept between calls).
+RenderTimer wall_clock_render_timer();
+
+class TrainingEta {
+ public:
+  // A run of views [first, total) of `config`'s schedule.
+  TrainingEta(const TrainConfig& config, int64_t first, int64_t total, RenderTimer timer = wall_clock_render_timer());
+
+  // After each step: `done` views of the job trained, `elapsed` seconds of this run so far
+  // (its clock, which includes the time the renders here were timed: that is left out of
+  // the rates). May time the static renders (see above), on this thread's trainer.
+  void observe(const Trainer& trainer, int64_t done, double elapsed);
+
+  // Seconds left after `done` views; negative until a rate is known (the first
+  // kMinWindow views of the run).
+  double remaining(int64_t done) const;
+
+  // The estimates made when the run passed 10, 25 and 50 % of its views, each with the time
+  // it took from there (`total_elapsed`: the run's training seconds), for metrics.json.
+  nlohmann::json accuracy(double total_elapsed) const;
+
+  static constexpr int64_t kMinWindow = 20;   // views a rate is measured over, at least
+  static constexpr int64_t kMaxWindow = 400;  // … and at most (the recent rate, as Gaussians grow)
+  static constexpr int kTimings = 3;          // renders per phase each time, the fastest kept
+
+ private:
+  // Times a render at every factor the views [from, total) reach.
+  void time_renders(const Trainer& trainer, int64_t from);
+  double clock(double elapsed) const { return elapsed - timing_seconds_; }
+
+  TrainConfig config_;
+  int64_t first_, total_;
+  struct Sample {
+    int64_t done;
+    double seconds;  // the run's clock without the render timing
+  };
+  std::vector<Sample> window_;  // this phase's recent samples, oldest first
+  Phase phase_;                 // of the last view observed (none at first)
+  double rate_ = -1;            // seconds per view in that phase; < 0 before one is known
+  std::map<Phase, double> render_seconds_;
+  size_t timed_gaussians_ = 0;
+  int64_t timed_at_ = -1;
+  double timing_seconds_ = 0;
+  struct Estimate {
+    int percent;
+    int64_t done = -1;
+    double at_seconds = 0, predicted = 0;
+  };
+  std::vector<Estimate> estimates_{{10}, {25}, {50}};
+  RenderTimer timer_;
+};
+
+}  // namespace desplat
