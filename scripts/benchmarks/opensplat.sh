@@ -11,8 +11,14 @@
 #                    HEAD is exported); default: git clone https://github.com/WebODM/OpenSplat
 #   OPENSPLAT_BUILD  folder for the patched source copy, the build and the commit it was built
 #                    from (default $WORK/opensplat/build); an existing build there is reused
+#   KERNEL_ISA       desplat's pixel loops (kernel_isa: auto, avx2, …; default auto). To run
+#                    both as on an AVX2-only CPU from an AVX-512 one: APPS from an x86-64-v3
+#                    build (scripts/benchmarks/avx2.sh), KERNEL_ISA=avx2 and
+#                    ATEN_CPU_CAPABILITY=avx2 (libtorch's kernels; OpenSplat's own code is
+#                    built without -march, for any x86-64)
 source "$(dirname "$0")/lib.sh"
 ITERATIONS=${ITERATIONS:-2000}
+KERNEL_ISA=${KERNEL_ISA:-auto}
 VAL=0027.jpg
 THREADS=2
 R=$WORK/opensplat
@@ -72,7 +78,7 @@ export OMP_NUM_THREADS=$THREADS
 echo "$VAL" > "$R/test_list.txt"
 echo "desplat: $ITERATIONS steps"
 "${pin[@]}" /usr/bin/time -v -o "$R/desplat.time" "$APPS/desplat_train" --data "$FOX" --out "$R/desplat" \
-  --overwrite --static-only --config '{"num_downscales": 0}' --downscale 4 --iterations "$ITERATIONS" \
+  --overwrite --static-only --config "{\"num_downscales\": 0, \"kernel_isa\": \"$KERNEL_ISA\"}" --downscale 4 --iterations "$ITERATIONS" \
   --threads $THREADS --split lists --test-list "$R/test_list.txt" --checkpoint-every 0 > "$R/desplat.log" 2>&1 ||
   { tail -20 "$R/desplat.log" >&2; exit 1; }
 
@@ -85,9 +91,10 @@ rm -rf "$R/opensplat" && mkdir -p "$R/opensplat"
   --val --val-image "$VAL" --downscale-factor 4 --num-iters "$ITERATIONS" > "$R/opensplat.log" 2>&1 ||
   { tail -20 "$R/opensplat.log" >&2; exit 1; }
 
-python3 - "$R" "$VAL" "$ITERATIONS" "$commit" "$torch" "$(git -C "$ROOT" rev-parse --short HEAD)" "$(machine)" <<'PY'
+python3 - "$R" "$VAL" "$ITERATIONS" "$commit" "$torch" "$(git -C "$ROOT" rev-parse --short HEAD)" "$(machine)" \
+  "$KERNEL_ISA" "${ATEN_CPU_CAPABILITY:-default}" <<'PY'
 import json, re, sys
-r, val, iters, commit, torch, desplat_commit, machine = sys.argv[1:]
+r, val, iters, commit, torch, desplat_commit, machine, isa, aten = sys.argv[1:]
 
 def usage(path):  # wall seconds and peak RSS [MB] from /usr/bin/time -v
     t = open(path).read()
@@ -114,7 +121,8 @@ size = size if size == os_size else f"{size} (desplat), {os_size} (OpenSplat)"
 rows = [("desplat", *usage(f"{r}/desplat.time"), m["mean_psnr"], m["gaussians"]),
         ("OpenSplat", *usage(f"{r}/opensplat.time"), float(found[0][1]), os_gaussians)]
 out = [f"Fox, 1/4 size ({size}), {iters} steps, {val} held out; desplat {desplat_commit} "
-       f"(--static-only, --threads 2), OpenSplat {commit[:12]} (--cpu, libtorch {torch}).", "",
+       f"(--static-only, --threads 2, kernel_isa {isa}: {m['median_step_seconds_full_resolution']['kernel_isa']}), "
+       f"OpenSplat {commit[:12]} (--cpu, libtorch {torch}, ATEN_CPU_CAPABILITY {aten}).", "",
        "| tool | wall | peak RSS | held-out PSNR | Gaussians |", "|---|---|---|---|---|"]
 out += [f"| {n} | {w:.1f} s | {rss:.0f} MB | {p:.2f} dB | {g:,} |" for n, w, rss, p, g in rows]
 out += ["", f"OpenSplat / desplat wall time: {rows[1][1] / rows[0][1]:.2f}x", "", f"machine: {machine}"]
