@@ -128,10 +128,26 @@ void sort_by_depth(std::vector<uint64_t>& keys, std::vector<uint64_t>& scratch) 
 // order as gsplat's radix sort of (tile, depth) keys. The fill runs in parallel over
 // bands of tile rows: each thread walks the whole depth order but writes only its own
 // tiles, so there are no races and the result does not depend on the thread count.
+// The binning's working arrays, kept between calls on the calling thread so a training step
+// allocates (and page-faults in) none of them; their contents mean nothing between calls.
+struct Listed {  // a Gaussian in depth order, with what the fill reads of it
+  int32_t id, first_record;
+  TileRect rect;
+};
+struct BinScratch {
+  std::vector<TileRect> rects;
+  std::vector<std::vector<uint64_t>> chunk_keys, chunk_scratch;
+  std::vector<int32_t> chunk_counts;
+  std::vector<uint64_t> keys, merged;
+  std::vector<Listed> listed;
+};
+
 void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
+  static thread_local BinScratch scratch;
   const int64_t n = static_cast<int64_t>(out.visible.size());
   // Each Gaussian's tiles, worked out once: none when α < 1/255 everywhere.
-  std::vector<TileRect> rects(n);
+  std::vector<TileRect>& rects = scratch.rects;
+  rects.resize(n);
   out.gaussian_offsets.assign(n + 1, 0);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int64_t i = 0; i < n; ++i) {
@@ -159,12 +175,15 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   // whatever the thread count; each chunk also counts its Gaussians' entries per tile.
   const int chunks = std::max(1, threads);
   const int tiles = grid.count();
-  std::vector<std::vector<uint64_t>> chunk_keys(chunks), chunk_scratch(chunks);
-  std::vector<int32_t> chunk_counts(size_t(chunks) * tiles, 0);
+  std::vector<std::vector<uint64_t>>&chunk_keys = scratch.chunk_keys, &chunk_scratch = scratch.chunk_scratch;
+  chunk_keys.resize(chunks), chunk_scratch.resize(chunks);
+  std::vector<int32_t>& chunk_counts = scratch.chunk_counts;
+  chunk_counts.assign(size_t(chunks) * tiles, 0);
 #pragma omp parallel for num_threads(threads) schedule(static, 1)
   for (int ch = 0; ch < chunks; ++ch) {
     const int64_t lo = n * ch / chunks, hi = n * (ch + 1) / chunks;
     std::vector<uint64_t>& keys = chunk_keys[ch];
+    keys.clear();
     keys.reserve(size_t(hi - lo));
     int32_t* counts = &chunk_counts[size_t(ch) * tiles];
     for (int64_t i = lo; i < hi; ++i) {
@@ -176,7 +195,10 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
     }
     sort_by_depth(keys, chunk_scratch[ch]);
   }
-  std::vector<uint64_t> keys = std::move(chunk_keys[0]), merged;
+  // The merged order ends in `keys` (swapped with chunk 0's buffer, whose capacity comes
+  // back to the scratch either way).
+  std::vector<uint64_t>&keys = scratch.keys, &merged = scratch.merged;
+  keys.swap(chunk_keys[0]);
   for (int ch = 1; ch < chunks; ++ch) {
     merged.resize(keys.size() + chunk_keys[ch].size());
     std::merge(keys.begin(), keys.end(), chunk_keys[ch].begin(), chunk_keys[ch].end(), merged.begin());
@@ -186,14 +208,10 @@ void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   const int64_t entries = out.gaussian_offsets[n];
   if (entries > INT32_MAX) throw std::runtime_error("too many tile–Gaussian intersections");
   // The Gaussians in depth order with what the fill reads of each, so its threads walk one
-  // array in order instead of gathering from three by id.
-  struct Listed {
-    int32_t id, first_record;
-    TileRect rect;
-  };
-  // Built on the threads; a Gaussian listed in no tile keeps its empty rectangle, which the
-  // fill passes over.
-  std::vector<Listed> listed(keys.size());
+  // array in order instead of gathering from three by id. Built on the threads; a Gaussian
+  // listed in no tile keeps its empty rectangle, which the fill passes over.
+  std::vector<Listed>& listed = scratch.listed;
+  listed.resize(keys.size());
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (size_t k = 0; k < keys.size(); ++k) {
     const int32_t i = static_cast<int32_t>(keys[k] & 0xffffffffu);
