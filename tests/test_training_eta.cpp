@@ -48,6 +48,13 @@ TEST(TrainingEta, PredictionIsTheSumOverTheScheduleViewByView) {
   }
 }
 
+TEST(TrainingEta, TheLineSaysWhenItDoesNotKnowAndWhenTheModelStillGrows) {
+  EXPECT_EQ(format_eta(-1, true), "--");
+  EXPECT_EQ(format_eta(83.4, false), "1m23s");
+  EXPECT_EQ(format_eta(83.4, true), "1m23s+");
+  EXPECT_EQ(format_eta(0, false), "0m00s");
+}
+
 TEST(TrainingEta, APhaseWithoutARenderTimeIsALogicError) {
   TrainConfig c;
   c.num_downscales = 1, c.resolution_schedule = 10, c.sh_degree = 0;

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "desplat/core/stopwatch.hpp"
+#include "jobs/text_format.hpp"
 
 namespace desplat {
 
@@ -43,6 +44,11 @@ double predict_remaining_seconds(const TrainConfig& schedule, int64_t done, int6
     v = end;
   }
   return seconds;
+}
+
+std::string format_eta(double seconds, bool growing) {
+  if (seconds < 0) return "--";
+  return format_duration(seconds, DurationStyle::compact) + (growing ? "+" : "");
 }
 
 RenderTimer wall_clock_render_timer() {

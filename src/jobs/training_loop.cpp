@@ -28,18 +28,17 @@ bool reaches_multiple(int64_t before, int64_t after, int64_t every) { return aft
 class Progress {
  public:
   Progress(int64_t total, int log_every) : total_(total), log_every_(log_every), tty_(isatty(fileno(stdout))) {}
-  // `eta`: seconds left (TrainingEta), negative while unknown.
-  void update(const StepStats& s, double elapsed, int64_t done_this_run, double eta) {
+  // `eta`: the time left as format_eta writes it.
+  void update(const StepStats& s, double elapsed, int64_t done_this_run, const std::string& eta) {
     const int64_t step = s.step + s.views;
     const bool due = tty_ ? (Clock::now() - last_ > std::chrono::milliseconds(200) || step == total_)
                           : (reaches_multiple(s.step, step, std::max(1, log_every_)) || step == total_);
     if (!due) return;
     last_ = Clock::now();
     const double rate = done_this_run / std::max(elapsed, 1e-9);
-    const std::string left = eta < 0 ? "--" : format_duration(eta, DurationStyle::compact);
     char line[256];
     std::snprintf(line, sizeof line, "%6lld/%lld %3d%% ETA %s  loss %.4f  psnr %.2f  %zu Gaussians  %.2f it/s",
-                  (long long)step, (long long)total_, int(100 * step / total_), left.c_str(), s.loss, s.psnr,
+                  (long long)step, (long long)total_, int(100 * step / total_), eta.c_str(), s.loss, s.psnr,
                   s.gaussians, rate);
     if (tty_) {
       const int width = 20, filled = int(width * step / total_);
@@ -139,7 +138,10 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
     r.step_seconds.push_back(s.timings.total());
     const double elapsed = run_clock.seconds();
     eta.observe(trainer, trainer.current_step(), elapsed);
-    progress.update(s, elapsed, trainer.current_step() - first, eta.remaining(trainer.current_step()));
+    const bool growing = config.densify.enabled && trainer.current_step() < config.densify.stop_split_at &&
+                         trainer.current_step() < config.iterations;
+    progress.update(s, elapsed, trainer.current_step() - first,
+                    format_eta(eta.remaining(trainer.current_step()), growing));
     const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
     interval_bytes += s.comm_bytes, interval_comm_seconds += s.comm_seconds;

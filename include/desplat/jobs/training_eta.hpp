@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -46,6 +47,11 @@ using RenderTimer = std::function<double(const GaussianView& g, const Camera& ca
 // The real one: rasterize_forward + rasterize_backward, timed by the wall clock (its buffers
 // are its own and kept between calls).
 RenderTimer wall_clock_render_timer();
+
+// The progress line's ETA: "--" while unknown (seconds < 0), else the compact duration, with a
+// "+" while the static Gaussians may still grow (`growing`: before densify.stop_split_at),
+// which the estimate does not foresee.
+std::string format_eta(double seconds, bool growing);
 
 class TrainingEta {
  public:
