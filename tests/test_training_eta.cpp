@@ -105,6 +105,8 @@ TEST(TrainingEta, EstimateIsExactWhenViewsCostWhatTheModelSays) {
   // left and the two to come) and at view 100 (the phase left and the last).
   constexpr int k = TrainingEta::kTimings;
   EXPECT_EQ(timings, 3 * (k + 1) + 3 * k + 2 * k);
+  EXPECT_NEAR(eta.timing_seconds(),
+              (k + 1) * (0.002 + 0.008 + 0.009) + k * (0.002 + 0.008 + 0.009) + k * (0.008 + 0.009), 1e-12);
   // metrics.json's record: the estimate at 10 % (view 12, no rate yet: the first with one,
   // view 21), 25 % (view 30) and 50 % (view 60), against the clock's time left.
   const nlohmann::json acc = eta.accuracy(at[c.iterations]);

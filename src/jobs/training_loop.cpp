@@ -181,6 +181,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
   }
   r.wall_seconds = run_clock.seconds();
   r.eta_accuracy = eta.accuracy(r.wall_seconds);
+  r.eta_timing_seconds = eta.timing_seconds();
   return r;
 }
 

@@ -155,6 +155,7 @@ void write_training_outputs(const Trainer& trainer, const TrainingRunOptions& op
   metrics["history"] = record.history;
   metrics["wall_seconds_this_run"] = record.wall_seconds;
   metrics["eta_accuracy"] = record.eta_accuracy;
+  metrics["eta_timing_seconds"] = record.eta_timing_seconds;
   metrics["peak_memory_mb"] = peak_mb[0];
   metrics["ranks"] = {{"count", trainer.ranks()},
                       {"communicator", trainer.communicator() ? trainer.communicator()->kind() : "single process"},

@@ -46,6 +46,7 @@ struct TrainingRecord {
   std::vector<double> comm_bytes, comm_seconds, step_seconds;
   double wall_seconds = 0;                                // this process's training, without the final evaluation
   nlohmann::json eta_accuracy = nlohmann::json::array();  // TrainingEta::accuracy
+  double eta_timing_seconds = 0;                          // TrainingEta::timing_seconds
   bool interrupted = false;                               // stopped by stop_requested (checkpoint written)
 };
 // Trains `trainer` to config.iterations with progress output, periodic evaluation and

@@ -70,6 +70,8 @@ class TrainingEta {
   // The estimates made when the run passed 10, 25 and 50 % of its views, each with the time
   // it took from there (`total_elapsed`: the run's training seconds), for metrics.json.
   nlohmann::json accuracy(double total_elapsed) const;
+  // Seconds spent timing renders so far (part of the run's training time).
+  double timing_seconds() const { return timing_seconds_; }
 
   static constexpr int64_t kMinWindow = 20;   // views a rate is measured over, at least
   static constexpr int64_t kMaxWindow = 400;  // … and at most (the recent rate, as Gaussians grow)
