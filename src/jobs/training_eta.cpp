@@ -148,7 +148,7 @@ nlohmann::json TrainingEta::accuracy(double total_elapsed) const {
                    {"views_done", e.done},
                    {"predicted_seconds", e.predicted},
                    {"actual_seconds", actual},
-                   {"error", actual > 0 ? e.predicted / actual - 1 : 0.0}});
+                   {"error", actual > 0 ? nlohmann::json(e.predicted / actual - 1) : nlohmann::json(nullptr)}});
   }
   return out;
 }

@@ -123,13 +123,8 @@ void sort_by_depth(std::vector<uint64_t>& keys, std::vector<uint64_t>& scratch) 
   }
 }
 
-// Builds the depth-sorted per-tile work lists. Visible Gaussians are sorted once by
-// (depth, id) and appended to their tiles in that order, which yields the same per-tile
-// order as gsplat's radix sort of (tile, depth) keys. The fill runs in parallel over
-// bands of tile rows: each thread walks the whole depth order but writes only its own
-// tiles, so there are no races and the result does not depend on the thread count.
 // The binning's working arrays, kept between calls on the calling thread so a training step
-// allocates (and page-faults in) none of them; their contents mean nothing between calls.
+// allocates none of them; their contents mean nothing between calls.
 struct Listed {  // a Gaussian in depth order, with what the fill reads of it
   int32_t id, first_record;
   TileRect rect;
@@ -142,6 +137,11 @@ struct BinScratch {
   std::vector<Listed> listed;
 };
 
+// Builds the depth-sorted per-tile work lists. Visible Gaussians are sorted once by
+// (depth, id) and appended to their tiles in that order, which yields the same per-tile
+// order as gsplat's radix sort of (tile, depth) keys. The fill runs in parallel over
+// bands of tile rows: each thread walks the whole depth order but writes only its own
+// tiles, so there are no races and the result does not depend on the thread count.
 void bin_gaussians(const TileGrid& grid, int threads, RasterOutput& out) {
   static thread_local BinScratch scratch;
   const int64_t n = static_cast<int64_t>(out.visible.size());
