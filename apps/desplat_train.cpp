@@ -18,7 +18,13 @@
 int main(int argc, char** argv) {
   // Under mpirun or srun one rank of a data-parallel job (docs/METHOD.md §6, ranks), else one
   // process. Opened first: MPI may take its own arguments out of argv.
-  const std::unique_ptr<desplat::Communicator> comm = desplat::open_communicator(&argc, &argv);
+  std::unique_ptr<desplat::Communicator> comm;
+  try {
+    comm = desplat::open_communicator(&argc, &argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "desplat_train: error: %s\n", e.what());
+    return 2;
+  }
   // Only rank 0 prints progress; every rank's warnings and errors go to stderr.
   if (comm->rank() != 0 && !std::freopen("/dev/null", "w", stdout)) return 1;
   CLI::App app{

@@ -1,10 +1,13 @@
 // The one-process communicator (desplat/comm/communicator.hpp): a job of one rank, whose sums
 // and broadcasts leave the values as they are, and whose abort ends the process with its
-// message. The MPI communicator's checks run under mpirun (tests/comm_mpi_check.cpp).
+// message; and how a launch is read (read_launch_environment). The MPI communicator's checks run
+// under mpirun (tests/comm_mpi_check.cpp).
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <limits>
+#include <map>
+#include <string>
 #include <vector>
 
 #include "desplat/comm/communicator.hpp"
@@ -57,6 +60,61 @@ TEST(OpenCommunicator, WithoutALauncherIsOneProcess) {
   const auto comm = open_communicator(&argc, &argv);
   EXPECT_EQ(comm->size(), 1);
   EXPECT_STREQ(comm->kind(), "single process");
+}
+
+// An environment as a table, for read_launch_environment.
+LaunchEnvironment launched_with(const std::map<std::string, std::string>& vars, bool with_mpi) {
+  return read_launch_environment(
+      [&](const char* name) -> const char* {
+        const auto it = vars.find(name);
+        return it == vars.end() ? nullptr : it->second.c_str();
+      },
+      with_mpi);
+}
+
+// The variables each launcher sets, as srun (Slurm 22.05), sbatch and Open MPI 4.1's mpirun set
+// them on Debian 12 (scripts/checks/srun.sh's cluster).
+TEST(LaunchEnvironment, EachLauncherIsReadForWhatItStarted) {
+  // A plain start, and an sbatch script (SLURM_PROCID without a job step): one process.
+  EXPECT_FALSE(launched_with({}, true).mpi);
+  EXPECT_EQ(launched_with({}, true).tasks, 1);
+  const LaunchEnvironment batch = launched_with({{"SLURM_PROCID", "0"}, {"SLURM_NTASKS", "2"}}, true);
+  EXPECT_FALSE(batch.mpi);
+  EXPECT_EQ(batch.tasks, 1);
+  EXPECT_EQ(batch.error, "");
+  // srun with one task and no MPI plugin: one process, MPI never initialized.
+  const LaunchEnvironment one =
+      launched_with({{"SLURM_PROCID", "0"}, {"SLURM_STEP_ID", "0"}, {"SLURM_STEP_NUM_TASKS", "1"}}, true);
+  EXPECT_FALSE(one.mpi);
+  EXPECT_EQ(one.error, "");
+  // srun --mpi=pmix with two tasks, and mpirun -np 3: MPI.
+  const LaunchEnvironment pmix = launched_with(
+      {{"SLURM_PROCID", "1"}, {"SLURM_STEP_NUM_TASKS", "2"}, {"PMIX_RANK", "1"}, {"SLURM_NTASKS", "2"}}, true);
+  EXPECT_TRUE(pmix.mpi);
+  EXPECT_EQ(pmix.tasks, 2);
+  EXPECT_EQ(pmix.error, "");
+  const LaunchEnvironment mpirun = launched_with({{"OMPI_COMM_WORLD_SIZE", "3"}, {"PMIX_RANK", "0"}}, true);
+  EXPECT_TRUE(mpirun.mpi);
+  EXPECT_EQ(mpirun.tasks, 3);
+}
+
+TEST(LaunchEnvironment, ALaunchThatCannotRunSaysWhatToDo) {
+  // srun's two tasks without --mpi=pmix: MPI_Init would fail in each; say how to start it.
+  const LaunchEnvironment srun = launched_with({{"SLURM_PROCID", "0"}, {"SLURM_STEP_NUM_TASKS", "2"}}, true);
+  EXPECT_EQ(srun.error,
+            "started by srun as 2 tasks without an MPI plugin that Open MPI can join; run srun --mpi=pmix (or set "
+            "MpiDefault=pmix in slurm.conf)");
+  // Two processes of a build without MPI would each train alone into one output folder.
+  for (const auto& vars : std::vector<std::map<std::string, std::string>>{
+           {{"OMPI_COMM_WORLD_SIZE", "2"}, {"PMIX_RANK", "0"}}, {{"SLURM_STEP_NUM_TASKS", "4"}, {"PMIX_RANK", "3"}}}) {
+    const LaunchEnvironment e = launched_with(vars, false);
+    EXPECT_NE(e.error.find("this build has no MPI, so each would train alone into the same output folder"),
+              std::string::npos)
+        << e.error;
+  }
+  // One process of that build under mpirun -np 1 is fine; a count that is not one is ignored.
+  EXPECT_EQ(launched_with({{"OMPI_COMM_WORLD_SIZE", "1"}}, false).error, "");
+  EXPECT_EQ(launched_with({{"SLURM_STEP_NUM_TASKS", "two"}}, true).tasks, 1);
 }
 
 }  // namespace

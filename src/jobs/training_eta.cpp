@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -26,8 +27,31 @@ int64_t phase_end(const TrainConfig& schedule, int64_t view, int64_t total) {
   return std::max(end, view + 1);
 }
 
+double GrowthForecast::relative_count(int64_t done, int64_t v) const {
+  if (cycle <= 0) return 1;
+  const double reference = rate_count > 0 ? rate_count : count_now;
+  if (v <= grows_from) return count_now / reference;
+  // The share of cycle k before grows_until, in [0, 1]; none for a cycle over before grows_from.
+  auto part = [&](int64_t k) {
+    if ((k + 1) * cycle <= grows_from) return 0.0;
+    return std::clamp(double(grows_until - k * cycle) / double(cycle), 0.0, 1.0);
+  };
+  const int64_t now = done / cycle;
+  const double start = start_count > 0 ? start_count : count_now;
+  double count = count_now;
+  if (done < grows_until && part(now) > 0) count = std::max(count_now, start * std::pow(factor, part(now)));
+  for (int64_t k = now + 1; k <= v / cycle; ++k) count *= std::pow(factor, part(k));
+  return count / reference;
+}
+
+int64_t GrowthForecast::next_change(int64_t v) const {
+  if (cycle <= 0) return std::numeric_limits<int64_t>::max();
+  if (v <= grows_from) return std::min(grows_from + 1, (v / cycle + 1) * cycle);
+  return (v / cycle + 1) * cycle;
+}
+
 double predict_remaining_seconds(const TrainConfig& schedule, int64_t done, int64_t total, double rate,
-                                 const std::map<Phase, double>& render_seconds) {
+                                 const std::map<Phase, double>& render_seconds, const GrowthForecast& growth) {
   if (done >= total) return 0;
   auto render = [&](Phase p) {
     const auto it = render_seconds.find(p);
@@ -39,16 +63,17 @@ double predict_remaining_seconds(const TrainConfig& schedule, int64_t done, int6
   const double current = render(phase_at(schedule, done));
   double seconds = 0;
   for (int64_t v = done; v < total;) {
-    const int64_t end = phase_end(schedule, v, total);
-    seconds += double(end - v) * std::max(0.0, rate + render(phase_at(schedule, v)) - current);
+    const int64_t end = std::min(phase_end(schedule, v, total), growth.next_change(v));
+    seconds += double(end - v) * std::max(0.0, rate + render(phase_at(schedule, v)) - current) *
+               growth.relative_count(done, v);
     v = end;
   }
   return seconds;
 }
 
-std::string format_eta(double seconds, bool growing) {
+std::string format_eta(double seconds) {
   if (seconds < 0) return "--";
-  return format_duration(seconds, DurationStyle::compact) + (growing ? "+" : "");
+  return format_duration(seconds, DurationStyle::compact);
 }
 
 RenderTimer wall_clock_render_timer() {
@@ -121,22 +146,56 @@ void TrainingEta::observe(const Trainer& trainer, int64_t done, double elapsed) 
     window_.clear();
     phase_ = phase;
   }
-  window_.push_back({done, now});
+  observe_growth(done, gaussians);
+  window_.push_back({done, now, double(gaussians)});
   while (window_.size() > 2 && window_.back().done - window_[1].done >= kMaxWindow) window_.erase(window_.begin());
   const Sample& oldest = window_.front();
-  if (window_.back().done - oldest.done >= kMinWindow)
+  if (window_.back().done - oldest.done >= kMinWindow) {
     rate_ = (window_.back().seconds - oldest.seconds) / double(window_.back().done - oldest.done);
+    // The count the rate stands for: the mean over the steps it was measured on.
+    double sum = 0;
+    for (size_t i = 1; i < window_.size(); ++i) sum += window_[i].count;
+    growth_.rate_count = sum / double(window_.size() - 1);
+  }
   for (Estimate& e : estimates_)
     if (e.done < 0 && rate_ >= 0 && done - first_ >= (total_ - first_) * e.percent / 100) {
       e.done = done;
       e.at_seconds = elapsed;
       e.predicted = remaining(done);
+      e.growth_factor = growth_.cycle > 0 ? growth_.factor : 1.0;
     }
+}
+
+void TrainingEta::observe_growth(int64_t done, size_t gaussians) {
+  const DensifySettings& d = config_.densify;
+  const int64_t cycle = int64_t(d.reset_alpha_every) * d.refine_every;
+  if (!d.enabled || cycle <= 0) {
+    growth_.cycle = 0;
+    return;
+  }
+  const int64_t c = done / cycle;
+  if (c != cycle_) {
+    // The cycle just left, if it followed an opacity reset (not the job's first: that one grows
+    // from the SfM points, by how far they fall short of the photos' detail), this run saw it
+    // from its start and densification ran through it.
+    if (cycle_ >= 1 && c == cycle_ + 1 && cycle_start_seen_ && c * cycle <= d.stop_split_at &&
+        growth_.start_count > 0 && gaussians > 0)
+      growth_.factor = double(gaussians) / growth_.start_count;
+    // No refinement but the one at the cycle's first view has run since it began, so the count
+    // is the one the cycle started from.
+    cycle_start_seen_ = done - c * cycle < d.refine_every;
+    growth_.start_count = cycle_start_seen_ ? double(gaussians) : 0;
+    cycle_ = c;
+  }
+  growth_.cycle = cycle;
+  growth_.grows_from = d.warmup;
+  growth_.grows_until = d.stop_split_at;
+  growth_.count_now = double(std::max<size_t>(1, gaussians));
 }
 
 double TrainingEta::remaining(int64_t done) const {
   if (rate_ < 0) return -1;
-  return predict_remaining_seconds(config_, done, total_, rate_, render_seconds_);
+  return predict_remaining_seconds(config_, done, total_, rate_, render_seconds_, growth_);
 }
 
 nlohmann::json TrainingEta::accuracy(double total_elapsed) const {
@@ -148,6 +207,7 @@ nlohmann::json TrainingEta::accuracy(double total_elapsed) const {
                    {"views_done", e.done},
                    {"predicted_seconds", e.predicted},
                    {"actual_seconds", actual},
+                   {"growth_factor", e.growth_factor},
                    {"error", actual > 0 ? nlohmann::json(e.predicted / actual - 1) : nlohmann::json(nullptr)}});
   }
   return out;

@@ -138,10 +138,7 @@ TrainingRecord train_to_end(Trainer& trainer, const TrainingRunOptions& opt, con
     r.step_seconds.push_back(s.timings.total());
     const double elapsed = run_clock.seconds();
     eta.observe(trainer, trainer.current_step(), elapsed);
-    const bool growing = config.densify.enabled && trainer.current_step() < config.densify.stop_split_at &&
-                         trainer.current_step() < config.iterations;
-    progress.update(s, elapsed, trainer.current_step() - first,
-                    format_eta(eta.remaining(trainer.current_step()), growing));
+    progress.update(s, elapsed, trainer.current_step() - first, format_eta(eta.remaining(trainer.current_step())));
     const int64_t done = trainer.current_step(), before = s.step;
     curve_loss += s.loss, curve_psnr += std::min(s.psnr, 99.0), ++curve_steps;  // +inf PSNR: a perfect step
     interval_bytes += s.comm_bytes, interval_comm_seconds += s.comm_seconds;

@@ -16,6 +16,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -81,10 +82,25 @@ std::unique_ptr<Communicator> single_process_communicator();
 // Whether this build has the MPI implementation (DESPLAT_WITH_MPI).
 bool built_with_mpi();
 
-// The job's communicator: MPI when this build has it and the process was started by an MPI
-// launcher (mpirun, mpiexec or srun: their environment says so), else one process. MPI is
-// initialized here (funneled threads: OpenMP inside, MPI from this thread only) and finalized
-// when the communicator is destroyed; open at most one per process.
+// How a process was started, read from its environment (`getenv`, or a test's table):
+// - `mpi`: by a launcher MPI can join, whose variables say so (mpirun's OMPI_COMM_WORLD_SIZE,
+//   PMI_RANK/PMI_SIZE of Hydra and Slurm's pmi2, PMIX_RANK of srun --mpi=pmix);
+// - `tasks`: how many processes that launch started (1 when it does not say);
+// - `error`: why it cannot run, empty if it can: several processes but this build has no MPI
+//   (each would train alone into the same output), or srun's tasks without an MPI plugin
+//   (Debian's Open MPI joins srun only through PMIx: MPI_Init would fail).
+// srun with one task, and an sbatch script (SLURM_PROCID without a job step), are one process.
+struct LaunchEnvironment {
+  bool mpi = false;
+  int tasks = 1;
+  std::string error;
+};
+LaunchEnvironment read_launch_environment(const std::function<const char*(const char*)>& getenv, bool with_mpi);
+
+// The job's communicator: MPI when read_launch_environment says so, else one process; a
+// launch that cannot run throws std::runtime_error with its `error`. MPI is initialized here
+// (funneled threads: OpenMP inside, MPI from this thread only) and finalized when the
+// communicator is destroyed; open at most one per process.
 std::unique_ptr<Communicator> open_communicator(int* argc, char*** argv);
 
 }  // namespace desplat

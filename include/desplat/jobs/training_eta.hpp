@@ -1,4 +1,5 @@
-// The training time left, as the progress line shows it (docs/OUTPUTS.md, "Progress").
+// The training time left, as the progress line shows it (how close it comes: docs/BENCHMARKS.md,
+// "The ETA").
 //
 // The model: a training view's time is a part that does not depend on the schedule (density
 // control, bookkeeping) plus the static layer's render, forward and backward, which depends
@@ -6,9 +7,13 @@
 // last views of the current phase stands for the rest of it; a coming phase costs that rate
 // plus the difference of one timed forward + backward render of a training view in the two
 // phases, with the current Gaussians. The renders are timed again when the phase changes or
-// the Gaussian count has moved by a fifth, so growth the run has shown is in the estimate;
-// growth still to come is not, nor Adam's share of the higher SH bands (BENCHMARKS.md,
-// "Speed", how far off that leaves it).
+// the Gaussian count has moved by a fifth.
+//
+// Every view's cost is then scaled by the static Gaussians' count foreseen for it over the
+// count the rate was measured at (GrowthForecast): a step's work (projection, binning, pixel pairs, Adam) grows
+// with the count, which densification can still multiply several times after the first tenth
+// of a run. Not modelled: Adam's share of the higher SH bands, the distractor Gaussians
+// (BENCHMARKS.md, "The ETA", how far off the whole leaves it).
 #pragma once
 
 #include <cstdint>
@@ -35,11 +40,36 @@ Phase phase_at(const TrainConfig& schedule, int64_t view);
 // The first view after `view` (< total) in another phase, or `total`.
 int64_t phase_end(const TrainConfig& schedule, int64_t view, int64_t total);
 
-// Seconds for the training views [done, total) when a view of phase p costs
-// rate + render_seconds[p] − render_seconds[phase_at(done)] (render_seconds holds every
-// phase the views reach). Pure.
+// The static Gaussians' count over the views to come, relative to the count the rate was
+// measured at (a step's work grows with the count).
+// Densification works in cycles of `cycle` views (reset_alpha_every·refine_every; each after
+// the first opens with an opacity reset, after which the Gaussians whose gradients rise
+// split): the count climbs early in a cycle and then holds (BENCHMARKS.md, "The ETA"). So the
+// forecast is a step per cycle: the current cycle ends at max(now, start_count × factor), each
+// later cycle multiplies that by `factor`, and a cycle only part of which lies before
+// `grows_until` (densify.stop_split_at) by factor^(that part). Views up to `grows_from`
+// (densify.warmup), before the first refinement, keep the count, and cycles over by then do
+// not grow.
+struct GrowthForecast {
+  int64_t cycle = 0;        // views per cycle; 0: the count stays as it is
+  int64_t grows_from = 0;   // the last view before densification can add
+  int64_t grows_until = 0;  // the first view at which densification no longer adds
+  double factor = 1;        // growth over one cycle, > 0
+  double start_count = 0;   // the count when the current cycle began (≤ 0: unknown, taken as now)
+  double count_now = 1;     // > 0
+  double rate_count = 0;    // the count the rate was measured at (≤ 0: count_now)
+  // The count foreseen at view v (≥ the current view `done`) over rate_count: what a view
+  // at the rate then costs, relative to the rate (1 for every view when cycle is 0). Pure.
+  double relative_count(int64_t done, int64_t v) const;
+  // The first view after v (≥ done) at which relative_count changes, or a view ≥ total.
+  int64_t next_change(int64_t v) const;
+};
+
+// Seconds for the training views [done, total) when view v of phase p costs
+// (rate + render_seconds[p] − render_seconds[phase_at(done)]) × growth.relative_count(done, v)
+// (render_seconds holds every phase the views reach). Pure.
 double predict_remaining_seconds(const TrainConfig& schedule, int64_t done, int64_t total, double rate,
-                                 const std::map<Phase, double>& render_seconds);
+                                 const std::map<Phase, double>& render_seconds, const GrowthForecast& growth = {});
 
 // Seconds one static render takes, forward and backward, of `g` seen by `camera`: the time
 // it takes to answer, which TrainingEta leaves out of its rates.
@@ -48,10 +78,8 @@ using RenderTimer = std::function<double(const GaussianView& g, const Camera& ca
 // are its own and kept between calls).
 RenderTimer wall_clock_render_timer();
 
-// The progress line's ETA: "--" while unknown (seconds < 0), else the compact duration, with a
-// "+" while the static Gaussians may still grow (`growing`: before densify.stop_split_at),
-// which the estimate does not foresee.
-std::string format_eta(double seconds, bool growing);
+// The progress line's ETA: "--" while unknown (seconds < 0), else the compact duration.
+std::string format_eta(double seconds);
 
 class TrainingEta {
  public:
@@ -76,17 +104,27 @@ class TrainingEta {
   static constexpr int64_t kMinWindow = 20;   // views a rate is measured over, at least
   static constexpr int64_t kMaxWindow = 400;  // … and at most (the recent rate, as Gaussians grow)
   static constexpr int kTimings = 3;          // renders per phase each time, the fastest kept
+  // A cycle's growth until the run has completed one after an opacity reset (the job's first
+  // cycle is not one: it grows from the SfM points, by how far they fall short of the photos'
+  // detail, which no evidence at its start tells). The reset cycles of the scenes in
+  // BENCHMARKS.md, "The ETA", grew 1.40–1.58×.
+  static constexpr double kCycleGrowth = 1.5;
+  // The forecast the estimate uses now.
+  const GrowthForecast& growth() const { return growth_; }
 
  private:
   // Times a render at every factor the views [from, total) reach.
   void time_renders(const Trainer& trainer, int64_t from);
   double clock(double elapsed) const { return elapsed - timing_seconds_; }
+  // Follows the densification cycles: the count each began with, the last complete one's growth.
+  void observe_growth(int64_t done, size_t gaussians);
 
   TrainConfig config_;
   int64_t first_, total_;
   struct Sample {
     int64_t done;
     double seconds;  // the run's clock without the render timing
+    double count;    // static Gaussians after the step
   };
   std::vector<Sample> window_;  // this phase's recent samples, oldest first
   Phase phase_;                 // of the last view observed (none at first)
@@ -99,8 +137,12 @@ class TrainingEta {
     int percent;
     int64_t done = -1;
     double at_seconds = 0, predicted = 0;
+    double growth_factor = 1;  // the forecast's factor per cycle then
   };
   std::vector<Estimate> estimates_{{10}, {25}, {50}};
+  GrowthForecast growth_{.factor = kCycleGrowth};
+  int64_t cycle_ = -1;             // the densification cycle of the last view observed
+  bool cycle_start_seen_ = false;  // whether this run observed that cycle from its first view
   RenderTimer timer_;
 };
 
