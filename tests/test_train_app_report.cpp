@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <OpenImageIO/imageio.h>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -163,6 +164,20 @@ TEST_F(TrainApp, PhotosStructureFromMotionLostAreNamedInLogMetricsAndReport) {
             std::string::npos);
   EXPECT_NE(report.find("<tr><th>notes.txt</th><td>not a photo"), std::string::npos);
   EXPECT_NE(report.find("<td>colmap defaults</td><td>16</td>"), std::string::npos);
+  // The stages' times, as metrics.json has them (each under a minute with the stand-in: "4.2 s").
+  const nlohmann::json& stages = sfm["stage_seconds"];
+  auto seconds = [](const nlohmann::json& v) {
+    EXPECT_LT(v.get<double>(), 59.0);
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f s", v.get<double>());
+    return std::string(text);
+  };
+  const std::string times = "<tr><th>time by stage</th><td>features " + seconds(stages["extract"]) + ", matching " +
+                            seconds(stages["match"]) + ", evidence " + seconds(stages["evidence"]) + ", mapping " +
+                            seconds(stages["map"]) + "; " + seconds(sfm["seconds"]) + " in all</td>";
+  EXPECT_NE(report.find(times), std::string::npos) << times;
+  ASSERT_FALSE(sfm["mapper"].get<std::string>().empty());
+  EXPECT_NE(report.find("<tr><th>mapper</th><td>"), std::string::npos);
 }
 
 }  // namespace

@@ -142,6 +142,20 @@ std::string structure_from_motion(const json& m) {
                                 " px");
   s += row("cameras", sfm.value("cameras", std::string("?")));
   if (sfm.contains("matching")) s += row("matching", sfm.value("matching", std::string("?")));
+  // The capture's evidence and the mapper it chose (CaptureEvidence, desplat/sfm/sfm.hpp), and the
+  // time each stage took.
+  const json& capture = sfm.contains("capture") ? sfm["capture"] : json();
+  if (capture.is_object() && capture.contains("summary")) s += row("capture", capture.value("summary", ""));
+  if (!sfm.value("mapper", std::string()).empty()) s += row("mapper", sfm["mapper"].get<std::string>());
+  if (!sfm.value("escalation_stopped", std::string()).empty())
+    s += row("stopped early", sfm["escalation_stopped"].get<std::string>());
+  const json& stages = sfm.contains("stage_seconds") ? sfm["stage_seconds"] : json();
+  if (stages.is_object())
+    s += row("time by stage", "features " + format_duration(number(stages, "extract")) + ", matching " +
+                                  format_duration(number(stages, "match")) + ", evidence " +
+                                  format_duration(number(stages, "evidence")) + ", mapping " +
+                                  format_duration(number(stages, "map")) + "; " +
+                                  format_duration(number(sfm, "seconds")) + " in all");
   if (!sfm.value("warning", std::string()).empty()) s += row("warning", sfm["warning"].get<std::string>());
   s += "</table>\n<table><tr><th>step</th><th>photos placed</th><th>points</th><th>time</th><th>settings</th></tr>\n";
   for (const json& a : sfm.value("attempts", json::array()))
