@@ -5,6 +5,9 @@
 // (every photo has verified matches). How many photos colmap's mapper then places differs from
 // run to run on this scene (its RANSAC is not seeded), with these thresholds as with its
 // defaults, so the test prints the placement and where the cameras landed and asserts neither.
+// When the mapper places fewer than run_sfm's minimum of 4, run_sfm fails with the steps it
+// took, and colmap.log holds the evidence and the mapper's choice: the same rules are checked
+// there.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -62,8 +65,35 @@ TEST(SfmStreetWalk, AForwardWalkGetsTheForwardThresholdsFromTheFirstRunAndIsNeve
   o.out = tmp.path() / "sfm";
   o.num_threads = 2;
   o.min_registered_share = 0.1;  // a short model is reported here, not thrown
-  const sfm::SfmResult r = sfm::run_sfm(o);
   const int n = d.views.count;
+  sfm::SfmResult r;
+  try {
+    r = sfm::run_sfm(o);
+  } catch (const sfm::SfmError& e) {
+    ASSERT_TRUE(e.kind() == sfm::SfmErrorKind::TooFewRegistered || e.kind() == sfm::SfmErrorKind::NoModel) << e.what();
+    const std::string what = e.what(), log = slurp(o.out / "colmap.log");
+    EXPECT_CONTAINS(log, "desplat_sfm: mapper: forward walk");
+    EXPECT_CONTAINS(log, "0 photo(s) with fewer than 2 partners of 30 inliers");
+    EXPECT_CONTAINS(log, ", 0 could start colmap's default mapper");
+    int strong = 0, forward = 0;
+    const size_t at = log.find(" strong pairs (>= 100 inliers): ");
+    ASSERT_NE(at, std::string::npos) << log;
+    const size_t from = log.rfind(' ', at - 1) + 1;
+    ASSERT_EQ(std::sscanf(log.c_str() + from, "%d strong pairs (>= 100 inliers): %d move within", &strong, &forward), 2)
+        << log.substr(from, 120);
+    EXPECT_GE(forward, 0.9 * strong);
+    if (e.kind() == sfm::SfmErrorKind::TooFewRegistered) {
+      EXPECT_CONTAINS(what, "Photos placed by each step: forward walk ");
+      EXPECT_CONTAINS(what, "cannot help");
+    }
+    // The steps taken (the reason the ladder stopped names the matching steps it skipped).
+    const size_t list = what.find("Photos placed by each step: ");
+    const std::string steps = list == std::string::npos ? "" : what.substr(list, what.find('.', list) - list);
+    EXPECT_EQ(steps.find("guided matching"), std::string::npos) << steps;
+    EXPECT_EQ(steps.find("more features"), std::string::npos) << steps;
+    std::printf("street walk: the mapper placed too few this run\n%s\n", what.c_str());
+    return;
+  }
 
   // The evidence: (nearly) every strong pair moves along the viewing direction, and none meets
   // the start test of colmap's defaults.
