@@ -150,32 +150,29 @@ check() {
   local srun_cmd=(srun -n 2 -c 1 "${bind[@]}" --mpi="$mpi_plugin" --label nice -n "${NICE_LEVEL:-10}")
   echo "srun command: ${srun_cmd[*]} desplat_train ..."
   local t0 t1 st
+  # timed_run NAME LABEL CMD...: runs CMD with stdout/stderr in $runs/NAME.log/.err, prints its
+  # exit status and wall seconds; returns 1 (after saying so) when it failed.
+  timed_run() {
+    local name=$1 label=$2
+    shift 2
+    t0=$(date +%s.%N)
+    "$@" > "$runs/$name.log" 2> "$runs/$name.err"
+    st=$?
+    t1=$(date +%s.%N)
+    echo "$label: exit $st, $(echo "$t1 - $t0" | bc) s"
+    [ $st -eq 0 ] || { fail "$label exited $st:"; tail -20 "$runs/$name.err"; return 1; }
+  }
 
-  # 1. srun, plain (timed)
-  t0=$(date +%s.%N)
-  "${srun_cmd[@]}" "$train" "${args[@]}" --out "$runs/srun_a" > "$runs/srun_a.log" 2> "$runs/srun_a.err"
-  st=$?
-  t1=$(date +%s.%N)
-  echo "srun run a: exit $st, $(echo "$t1 - $t0" | bc) s"
-  [ $st -eq 0 ] || { fail "srun run a exited $st:"; tail -20 "$runs/srun_a.err"; return; }
-
+  # 1. srun, plain
+  timed_run srun_a "srun run a" "${srun_cmd[@]}" "$train" "${args[@]}" --out "$runs/srun_a" || return
   # 2. srun again, each rank under strace (file-creating calls only) to see who writes the output
-  t0=$(date +%s.%N)
-  "${srun_cmd[@]}" bash -c 'exec strace -f --seccomp-bpf -qq -o "$0/strace.rank$SLURM_PROCID" \
+  timed_run srun_b "srun run b (strace)" "${srun_cmd[@]}" bash -c 'exec strace -f --seccomp-bpf -qq \
+      -o "$0/strace.rank$SLURM_PROCID" \
       -e trace=open,openat,creat,rename,renameat,renameat2,mkdir,mkdirat,unlink,unlinkat,truncate "$@"' \
-    "$runs" "$train" "${args[@]}" --out "$runs/srun_b" > "$runs/srun_b.log" 2> "$runs/srun_b.err"
-  st=$?
-  t1=$(date +%s.%N)
-  echo "srun run b (strace): exit $st, $(echo "$t1 - $t0" | bc) s"
-  [ $st -eq 0 ] || { fail "srun run b exited $st:"; tail -20 "$runs/srun_b.err"; return; }
-
-  # 3. mpirun, same arguments (timed)
-  t0=$(date +%s.%N)
-  nice -n "${NICE_LEVEL:-10}" mpirun -np 2 --oversubscribe "$train" "${args[@]}" --out "$runs/mpirun" > "$runs/mpirun.log" 2> "$runs/mpirun.err"
-  st=$?
-  t1=$(date +%s.%N)
-  echo "mpirun run: exit $st, $(echo "$t1 - $t0" | bc) s"
-  [ $st -eq 0 ] || { fail "mpirun exited $st:"; tail -20 "$runs/mpirun.err"; return; }
+    "$runs" "$train" "${args[@]}" --out "$runs/srun_b" || return
+  # 3. mpirun, same arguments
+  timed_run mpirun "mpirun run" nice -n "${NICE_LEVEL:-10}" mpirun -np 2 --oversubscribe "$train" "${args[@]}" \
+    --out "$runs/mpirun" || return
 
   local m r
   for r in srun_a srun_b mpirun; do

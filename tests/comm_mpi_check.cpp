@@ -1,5 +1,5 @@
-// The MPI communicator against known answers, run by ctest under `mpirun -np 2` (and with any
-// rank count by hand). Modes:
+// The MPI communicator against known answers, run by ctest under `mpirun -np 2` and `-np 4` (and
+// with any rank count by hand). Modes:
 //   collectives  sum (float, double, int64), broadcast and barrier against answers each rank
 //                computes itself; exits 0 when every check passes on every rank.
 //   abort        the last rank aborts while the others wait in a barrier that would never
@@ -25,6 +25,14 @@ void expect(bool ok, const std::string& what, int rank) {
 // (1e8 + 1 + … loses the ones that a different association would keep).
 float float_value(int r, size_t i) { return r == 0 ? 1e8f : 1.0f + float(i % 7) * 0.25f + float(r); }
 
+// The rank tree's sum (communicator.hpp) by its recursive definition: S(o, s) = S(o, 2s) +
+// S(o + s, 2s) over the ranks o, o + s, o + 2s, … below `size`.
+template <typename T, typename Value>
+T tree_sum(const Value& x, int size, int o = 0, int s = 1) {
+  if (o + s >= size) return x(o);
+  return tree_sum<T>(x, size, o, 2 * s) + tree_sum<T>(x, size, o + s, 2 * s);
+}
+
 int collectives(desplat::Communicator& comm) {
   const int rank = comm.rank(), size = comm.size();
   // Longer than one chunk of the ordered sum, so the chunking is covered.
@@ -34,11 +42,10 @@ int collectives(desplat::Communicator& comm) {
   comm.sum(f);
   size_t wrong = 0;
   for (size_t i = 0; i < n; ++i) {
-    float expected = float_value(0, i);
-    for (int r = 1; r < size; ++r) expected += float_value(r, i);  // ascending rank order, in float
+    const float expected = tree_sum<float>([&](int r) { return float_value(r, i); }, size);
     wrong += std::memcmp(&f[i], &expected, sizeof(float)) != 0;
   }
-  expect(wrong == 0, "float sum: " + std::to_string(wrong) + " values differ from the ascending-rank sum", rank);
+  expect(wrong == 0, "float sum: " + std::to_string(wrong) + " values differ from the rank tree's sum", rank);
   // Rerun: the same bits.
   std::vector<float> again(n);
   for (size_t i = 0; i < n; ++i) again[i] = float_value(rank, i);
@@ -47,8 +54,7 @@ int collectives(desplat::Communicator& comm) {
 
   std::vector<double> d = {double(rank) + 0.5, -1e300 * (rank == 0), 1.0 / (rank + 1)};
   comm.sum(d);
-  double harmonic = 0;
-  for (int r = 0; r < size; ++r) harmonic += 1.0 / (r + 1);
+  const double harmonic = tree_sum<double>([](int r) { return 1.0 / (r + 1); }, size);
   expect(d[0] == double(size) * (size - 1) / 2 + 0.5 * size, "double sum of r + 0.5", rank);
   expect(d[1] == -1e300, "double sum with one nonzero term", rank);
   expect(d[2] == harmonic, "double sum of 1/(r+1)", rank);

@@ -1,12 +1,16 @@
 // A batch of training views per optimizer step (docs/METHOD.md §6, batches): the summed static
-// gradient against the single-view gradients rendered by hand, the batched Adam rule against
-// the update computed in double, the schedules at equal views seen, and the per-view updates
-// of distractors and appearance embeddings.
+// gradient against the single-view gradients rendered by hand, its order of sums (the view
+// tree) against the ranks', the batched Adam rule against the update computed in double, the
+// schedules at equal views seen, and the per-view updates of distractors and appearance
+// embeddings.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <random>
 #include <set>
+#include <utility>
 
 #include "desplat/raster/composite.hpp"
 #include "desplat/train/batch.hpp"
@@ -72,6 +76,70 @@ TEST(Batch, OneStepsStaticGradientIsTheSumOfItsViewsGradients) {
   for (size_t k = 0; k < expected.size(); ++k)
     // Float sums of 4 terms and one float product: a few ulp of the largest gradient.
     ASSERT_NEAR(double(m[k]) / decay, expected[k], 1e-5 * largest) << "mean gradient " << k;
+}
+
+// The view tree's adds, worked out by hand: views [5, 2, 7, 0] split into the even {2, 0} and
+// the odd {5, 7}; the evens into 0 (bit 1 clear) and 2, the odds into 5 and 7.
+TEST(Batch, TheViewTreeAddsEvensThenOddsBitByBit) {
+  std::vector<std::pair<int, int>> adds;
+  const auto log = [&](int into, int from) { adds.emplace_back(into, from); };
+  const std::vector<int> views = {5, 2, 7, 0};
+  EXPECT_EQ(sum_in_view_tree(views, log), 3);
+  EXPECT_EQ(adds, (std::vector<std::pair<int, int>>{{3, 1}, {0, 2}, {3, 0}}));
+  // One view drawn twice (an epoch boundary in the batch): its entries in draw order.
+  adds.clear();
+  const std::vector<int> twice = {4, 1, 4};
+  EXPECT_EQ(sum_in_view_tree(twice, log), 0);
+  EXPECT_EQ(adds, (std::vector<std::pair<int, int>>{{0, 2}, {0, 1}}));
+  adds.clear();
+  EXPECT_EQ(sum_in_view_tree(std::vector<int>{6}, log), 0);
+  EXPECT_TRUE(adds.empty());
+  EXPECT_EQ(sum_in_view_tree({}, log), -1);
+}
+
+// The property ranks rely on (docs/METHOD.md §6, ranks): one process's view-tree sum of a batch
+// equals, bit for bit, each rank's view-tree sum of its own views (view ≡ r mod N, zero when it
+// holds none) added in the communicator's rank tree, written out here for N = 2 and 4. The
+// values are chosen so that the order of float additions changes the result; summing in draw
+// order instead must break the equality for some batch (the check can fail).
+TEST(Batch, OneProcessAndPowerOfTwoRanksAddTheSameFloatsInTheSameOrder) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> view_of(0, 15), length_of(1, 8);
+  std::uniform_real_distribution<float> small(0.5f, 8.0f);
+  const auto tree_of = [](std::span<const int> views, std::vector<float> x) {
+    const int root = sum_in_view_tree(views, [&](int into, int from) { x[size_t(into)] += x[size_t(from)]; });
+    return root < 0 ? 0.0f : x[size_t(root)];
+  };
+  const auto own_share = [](const std::vector<int>& views, const std::vector<float>& x, int r, int n) {
+    std::pair<std::vector<int>, std::vector<float>> mine;
+    for (size_t k = 0; k < views.size(); ++k)
+      if (views[k] % n == r) mine.first.push_back(views[k]), mine.second.push_back(x[k]);
+    return mine;
+  };
+  int draw_order_differs = 0;
+  for (int trial = 0; trial < 500; ++trial) {
+    std::vector<int> views(size_t(length_of(rng)));
+    std::vector<float> x(views.size());
+    for (size_t k = 0; k < views.size(); ++k) {
+      views[k] = view_of(rng);
+      x[k] = k == 0 ? 1e8f : small(rng);  // 1e8 + a few loses them unless they were added first
+    }
+    const float one = tree_of(views, x);
+    for (const int n : {2, 4}) {
+      std::vector<float> part(static_cast<size_t>(n));
+      for (int r = 0; r < n; ++r) {
+        const auto [v, xs] = own_share(views, x, r, n);
+        part[size_t(r)] = tree_of(v, xs);
+      }
+      const float ranks = n == 2 ? part[0] + part[1] : (part[0] + part[2]) + (part[1] + part[3]);
+      ASSERT_EQ(std::bit_cast<uint32_t>(one), std::bit_cast<uint32_t>(ranks))
+          << "trial " << trial << ", " << n << " ranks";
+    }
+    float drawn = 0.0f;
+    for (const float v : x) drawn += v;
+    draw_order_differs += std::bit_cast<uint32_t>(drawn) != std::bit_cast<uint32_t>(one);
+  }
+  EXPECT_GT(draw_order_differs, 0);
 }
 
 TEST(Batch, AdamStepWithBatchBetasAndRootRateMatchesDouble) {

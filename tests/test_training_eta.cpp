@@ -180,7 +180,6 @@ TEST(TrainingEta, TheForecastTakesTheLastCompleteCyclesGrowth) {
   TrainConfig c = short_schedule(130);
   c.distractors.enabled = false;
   c.densify.warmup = 5, c.densify.refine_every = 10, c.densify.reset_alpha_every = 4;
-  c.densify.grad_threshold = 8e-4f;  // most seen Gaussians densify: the count moves each cycle
   c.densify.stop_split_at = 130;
   c.densify.cull_scale = c.densify.cull_screen_size = 1e9f;  // the reset must not empty this small scene
   Trainer trainer(data, c);

@@ -5,6 +5,7 @@
 source "$(dirname "$0")/lib.sh"
 synth clutter_tracks_050
 csv=$DOCS/batch.csv
+mkdir -p "$WORK/batch"
 echo "scene,batch,psnr,ssim,static_gaussians,seconds" > "$csv"
 for b in 1 2 4 8; do
   for scene in fox clutter_tracks_050; do

@@ -100,8 +100,8 @@ class Mpi final : public Communicator {
     abort(std::string(call) + " failed: " + std::string(text, size_t(length)));
   }
 
-  // Chunk by chunk: gather every rank's values to rank 0, add them there in ascending rank
-  // order, broadcast the sums.
+  // Chunk by chunk: gather every rank's values to rank 0, add them there in the rank tree's
+  // order (communicator.hpp), broadcast the sums.
   template <typename T>
   void ordered_sum(std::span<T> values) {
     if (size_ == 1) return;
@@ -113,12 +113,18 @@ class Mpi final : public Communicator {
                        MPI_COMM_WORLD),
             "MPI_Gather");
       if (rank_ == 0) {
-        const T* all = reinterpret_cast<const T*>(gathered_.data());
-        for (size_t i = 0; i < n; ++i) {
-          T s = all[i];
-          for (int r = 1; r < size_; ++r) s += all[size_t(r) * n + i];
-          chunk[i] = s;
-        }
+        // Bottom-up: row o holds S(o, s) after the pass of stride s, from the widest stride
+        // below the rank count down to 1, where row 0 holds S(0, 1).
+        T* all = reinterpret_cast<T*>(gathered_.data());
+        int widest = 1;
+        while (2 * widest < size_) widest *= 2;
+        for (int s = widest; s >= 1; s /= 2)
+          for (int o = 0; o < s && o + s < size_; ++o) {
+            T* into = all + size_t(o) * n;
+            const T* from = all + size_t(o + s) * n;
+            for (size_t i = 0; i < n; ++i) into[i] += from[i];
+          }
+        std::copy_n(all, n, chunk);
       }
       check(MPI_Bcast(chunk, int(n), mpi_type<T>(), 0, MPI_COMM_WORLD), "MPI_Bcast");
     }

@@ -144,18 +144,21 @@ void TrainingEta::observe(const Trainer& trainer, int64_t done, double elapsed) 
     if (rate_ >= 0 && render_seconds_.count(phase_))
       rate_ = std::max(0.0, rate_ + render_seconds_[phase] - render_seconds_[phase_]);
     window_.clear();
+    window_count_sum_ = 0;
     phase_ = phase;
   }
   observe_growth(done, gaussians);
+  if (!window_.empty()) window_count_sum_ += double(gaussians);
   window_.push_back({done, now, double(gaussians)});
-  while (window_.size() > 2 && window_.back().done - window_[1].done >= kMaxWindow) window_.erase(window_.begin());
+  while (window_.size() > 2 && window_.back().done - window_[1].done >= kMaxWindow) {
+    window_count_sum_ -= window_[1].count;  // it becomes the oldest, which the mean leaves out
+    window_.pop_front();
+  }
   const Sample& oldest = window_.front();
   if (window_.back().done - oldest.done >= kMinWindow) {
     rate_ = (window_.back().seconds - oldest.seconds) / double(window_.back().done - oldest.done);
     // The count the rate stands for: the mean over the steps it was measured on.
-    double sum = 0;
-    for (size_t i = 1; i < window_.size(); ++i) sum += window_[i].count;
-    growth_.rate_count = sum / double(window_.size() - 1);
+    growth_.rate_count = window_count_sum_ / double(window_.size() - 1);
   }
   for (Estimate& e : estimates_)
     if (e.done < 0 && rate_ >= 0 && done - first_ >= (total_ - first_) * e.percent / 100) {

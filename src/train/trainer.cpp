@@ -303,11 +303,23 @@ StepStats Trainer::step() {
   batch_views_.resize(size_t(views));
   StepProfiler profile;
   const CommTotals comm_before = comm_ ? comm_->totals() : CommTotals{};
-  bool first = true;  // the first of the batch's views this rank holds starts the sums
+  bool first = true;                  // the first of the batch's views this rank holds starts the sums
+  std::vector<int> held, held_views;  // the batch's positions and views this rank trained
   for (int b = 0; b < views; ++b) {
     batch_views_[size_t(b)].index = step_ + b;
-    first &= !train_view(batch_views_[size_t(b)], first, profile, stats);
+    if (train_view(batch_views_[size_t(b)], first, profile, stats)) {
+      first = false;
+      held.push_back(b), held_views.push_back(batch_views_[size_t(b)].view);
+    }
   }
+  // The static gradients in the view tree's order, the same floats in the same order in one
+  // process and over a power-of-two number of ranks (docs/METHOD.md §6, ranks).
+  profile.time(&StepTimings::optimizer, [&] {
+    const int root = sum_in_view_tree(held_views, [&](int into, int from) {
+      add_gradients(batch_views_[size_t(held[size_t(into)])].grads, batch_views_[size_t(held[size_t(from)])].grads);
+    });
+    if (root >= 0) std::swap(batch_grads_, batch_views_[size_t(held[size_t(root)])].grads);
+  });
   if (comm_) profile.time(&StepTimings::optimizer, [&] { sum_batch_over_ranks(stats); });
   stats.loss /= views, stats.psnr /= views;
   const int64_t event = update_static(views, profile, stats);

@@ -168,11 +168,10 @@ bool Trainer::train_view(BatchView& bv, bool first, StepProfiler& profile, StepS
                                    : 1.0f;
       gaussians_.accumulate_statistics(static_pass_.forward, static_pass_.grads, config_.densify.stats, seen_scale);
     }
-    // The batch's static gradient: the first view's, plus each further view's.
-    if (first)
-      std::swap(batch_grads_, static_pass_.grads);
-    else
-      add_gradients(batch_grads_, static_pass_.grads);
+    // The view's static gradient waits for the batch's sum in the view tree (Trainer::step);
+    // the backward's per-entry scratch stays with the pass, so the batch holds no copy of it.
+    std::swap(bv.grads, static_pass_.grads);
+    std::swap(bv.grads.entry_scratch, static_pass_.grads.entry_scratch);
   });
   // The view's distractor buffer (its statistics are kept after densification stops:
   // culling unseen distractors needs them).

@@ -6,10 +6,15 @@
 // - Every rank calls the collectives (sum, broadcast, barrier) in the same order with the same
 //   sizes; a call returns on a rank once that rank's part is done.
 // - sum is deterministic for a fixed rank count: every rank ends with the same bits, and a rerun
-//   with the same ranks and inputs gives the same bits. The values are added in ascending rank
-//   order, ((x₀ + x₁) + x₂) + …, in the array's own type, by our code: MPI only moves the bytes
-//   (gather to rank 0, its ordered sum, broadcast back), because MPI_Allreduce may associate
-//   floating-point sums differently from call to call (the standard leaves the order open).
+//   with the same ranks and inputs gives the same bits. The values are added in the order of the
+//   rank tree, in the array's own type, by our code: the ranks with an even index sum first, the
+//   odd ones sum, then the two sums are added, recursively on the index's next bit, so
+//   S(o, s) = S(o, 2s) + S(o + s, 2s) over ranks o, o + s, o + 2s, … (a part with no rank is left
+//   out) and the job's sum is S(0, 1): x₀ + x₁ for 2 ranks, (x₀ + x₂) + (x₁ + x₃) for 4. With N a
+//   power of two this is the order in which one process adds a batch's views (sum_in_view_tree,
+//   docs/METHOD.md §6, ranks). MPI only moves the bytes (gather to rank 0, its ordered sum,
+//   broadcast back), because MPI_Allreduce may associate floating-point sums differently from
+//   call to call (the standard leaves the order open).
 // - abort ends every rank of the job and does not return; its message names the rank.
 // Not thread-safe: one thread (the one that opened it) calls a communicator.
 #pragma once

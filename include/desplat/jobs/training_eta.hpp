@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
 #include <string>
@@ -126,9 +127,10 @@ class TrainingEta {
     double seconds;  // the run's clock without the render timing
     double count;    // static Gaussians after the step
   };
-  std::vector<Sample> window_;  // this phase's recent samples, oldest first
-  Phase phase_;                 // of the last view observed (none at first)
-  double rate_ = -1;            // seconds per view in that phase; < 0 before one is known
+  std::deque<Sample> window_;    // this phase's recent samples, oldest first
+  double window_count_sum_ = 0;  // Σ count over window_ but its oldest (integers: exact)
+  Phase phase_;                  // of the last view observed (none at first)
+  double rate_ = -1;             // seconds per view in that phase; < 0 before one is known
   std::map<Phase, double> render_seconds_;
   size_t timed_gaussians_ = 0;
   int64_t timed_at_ = -1;

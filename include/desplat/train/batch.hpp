@@ -4,6 +4,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <span>
 
 #include "desplat/raster/raster.hpp"
 #include "desplat/train/param_groups.hpp"
@@ -19,6 +21,17 @@ LearningRates batch_learning_rates(LearningRates lr, int views);
 // `every` fires, or −1 when none falls in the batch; with views ≤ every at most one does.
 // A schedule's event at view t happens after the step of the batch holding t.
 int64_t batch_event(int64_t first, int views, int64_t every);
+
+// The order in which a batch's per-view values are summed (docs/METHOD.md §6, ranks), the view
+// tree: the entries whose view index is even are summed, the odd ones are summed, then the two
+// sums are added, recursively on the index's next bit; entries of one view index are added in
+// draw order. `views` are the entries' view indices in draw order; add(into, from) adds entry
+// `from`'s value into entry `into`'s. Returns the entry that holds the sum (−1 when empty).
+// The order does not depend on the rank count: with N ranks a power of two, rank r holds the
+// views ≡ r mod N, a subtree of its own, and the communicator's rank tree (communicator.hpp)
+// adds those subtrees as this tree does, so N ranks and one process add the same floats in
+// the same order.
+int sum_in_view_tree(std::span<const int> views, const std::function<void(int into, int from)>& add);
 
 // sum += g over every parameter group's gradient (kParamGroupTable); the shapes must agree.
 // Element by element, so the result does not depend on the thread count.

@@ -290,6 +290,7 @@ class Trainer {
     int factor = 1;                  // its resolution factor
     Camera camera;                   // at that factor
     std::vector<uint8_t> uncovered;  // its pixels neither layer explains [H·W of camera]
+    RasterGradients grads;           // its static gradient, on its rank, until the batch's sum
   };
   // Scratch reused every step.
   std::vector<BatchView> batch_views_;
@@ -303,8 +304,9 @@ class Trainer {
   int next_view();
   // One view's pass (docs/METHOD.md §4–7): draws the view and its background, renders, takes
   // the loss and the backward, applies its per-view updates (distractors, appearance,
-  // background) and adds its static gradient to batch_grads_ and its statistics to the
-  // static buffer's (`first`: the first view of the batch on this rank, which starts the sums).
+  // background), keeps its static gradient in bv.grads for the batch's sum and adds its
+  // statistics to the static buffer's (`first`: the first view of the batch on this rank,
+  // which starts the visible flags).
   // Every rank draws the view and its random background; only the view's rank trains it.
   // Returns whether this rank trained it.
   bool train_view(BatchView& bv, bool first, StepProfiler& profile, StepStats& stats);
