@@ -210,6 +210,14 @@ TEST(BenchGrid, InvalidGridsNameTheFileAndTheProblem) {
   EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "preset": "quick"}]})")
                 .find("run 'x': unknown preset 'quick'"),
             std::string::npos);
+  // Numbers beyond the setting's type are refused before any conversion to int (undefined there).
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x", "downscale": 8.9e95}]})")
+                .find("downscale must be a whole number in"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x"}], "threads": 2.5})").find("threads must be a whole"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"scenes": ["a"], "runs": [{"name": "x"}], "steps": -1e300})").find("steps must be a whole"),
+            std::string::npos);
   fs::remove_all(dir);
 }
 

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <set>
@@ -81,6 +82,17 @@ BenchGrid read_bench_grid(const fs::path& file) {
   }
   auto fail = [&](const std::string& what) { throw std::invalid_argument(file.string() + ": " + what); };
   if (!j.is_object()) fail("expected a JSON object");
+  // A whole number in [lo, hi] (an integral float such as 2.0 too): a JSON number beyond the
+  // target type's range would otherwise be converted with undefined behaviour.
+  auto whole = [&](const json& v, const std::string& name, int64_t lo, int64_t hi) -> int64_t {
+    if (!v.is_number()) return v.get<int64_t>();  // throws: the wrong type's message below
+    const double d = v.get<double>();
+    if (!(d >= double(lo) && d <= double(hi)) || d != std::floor(d))
+      fail(name + " must be a whole number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], not " +
+           v.dump());
+    return v.is_number_integer() ? v.get<int64_t>() : int64_t(d);
+  };
+  constexpr int64_t kIntMax = std::numeric_limits<int>::max(), kStepsMax = int64_t(1) << 60;
   BenchGrid g;
   std::string current;  // the setting being read, for a wrong type's message
   try {
@@ -90,11 +102,11 @@ BenchGrid read_bench_grid(const fs::path& file) {
         if (!value.is_array()) fail("\"scenes\" must be a list of scene folders, e.g. [\"out/bench\"]");
         for (const json& s : value) g.scenes.push_back(fs::absolute(file).parent_path() / s.get<std::string>());
       } else if (key == "steps") {
-        g.steps = value.get<int64_t>();
+        g.steps = whole(value, "steps", -kStepsMax, kStepsMax);
       } else if (key == "eval_every") {
-        g.eval_every = value.get<int>();
+        g.eval_every = int(whole(value, "eval_every", -kIntMax, kIntMax));
       } else if (key == "threads") {
-        g.threads = value.get<int>();
+        g.threads = int(whole(value, "threads", -kIntMax, kIntMax));
       } else if (key == "score_at") {
         const std::string where = value.get<std::string>();
         if (where != "full" && where != "training") fail("score_at must be \"full\" or \"training\"");
@@ -111,7 +123,7 @@ BenchGrid read_bench_grid(const fs::path& file) {
             else if (rk == "config")
               run.config = rv;
             else if (rk == "downscale")
-              run.downscale = rv.get<int>();
+              run.downscale = int(whole(rv, "downscale", -kIntMax, kIntMax));
             else if (rk == "preset")
               run.preset = rv.get<std::string>();
             else
